@@ -1,0 +1,63 @@
+# hotgauge — the two commands of the README, and what they need.
+#   make demo   install missing packages, build, simulate one hub-a part and measure it
+#   make test   install missing packages, build (incl. sanitizer build), run every test
+SHELL := /bin/bash
+BUILD ?= build
+BUILD_ASAN ?= build-asan
+JOBS ?= $(shell nproc)
+
+# Every dependency, once: Debian 12 packages only.
+DEB_PACKAGES := build-essential cmake pkg-config clang-format \
+  libeigen3-dev libpcl-dev libopencv-dev libopencv-contrib-dev libflann-dev \
+  libaravis-dev aravis-tools libmodbus-dev mbpoll socat libsystemd-dev \
+  libyaml-cpp-dev libspdlog-dev libcli11-dev nlohmann-json3-dev \
+  libgtest-dev libgmock-dev libbenchmark-dev \
+  python3-numpy python3-yaml python3-pymodbus python3-serial-asyncio
+
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: deps build build-asan demo test bench format clean
+
+deps:
+	@missing=$$(for p in $(DEB_PACKAGES); do \
+	    dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q 'install ok installed' || echo $$p; \
+	  done); \
+	if [ -n "$$missing" ]; then \
+	  echo "installing missing packages:" $$missing; \
+	  $(SUDO) apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
+	else echo "all packages present"; fi
+
+$(BUILD)/CMakeCache.txt:
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo
+
+build: deps $(BUILD)/CMakeCache.txt
+	cmake --build $(BUILD) -j $(JOBS)
+
+$(BUILD_ASAN)/CMakeCache.txt:
+	cmake -S . -B $(BUILD_ASAN) -DCMAKE_BUILD_TYPE=Debug -DHOTGAUGE_SANITIZE=ON -DHOTGAUGE_BENCH=OFF
+
+build-asan: deps $(BUILD_ASAN)/CMakeCache.txt
+	cmake --build $(BUILD_ASAN) -j $(JOBS)
+
+# The main job on the built-in simulated cell: one hub-a part, four faces, press vibration.
+DEMO_OUT ?= out/demo
+demo: build
+	rm -rf $(DEMO_OUT) $(DEMO_OUT).truth
+	$(BUILD)/src/app/hotgauge simulate --recipe config/parts/hub-a.yaml --cell config/cell.yaml \
+	  --out $(DEMO_OUT) --seed 1 --temperature 1050
+	$(BUILD)/src/app/hotgauge measure $(DEMO_OUT) --ply $(DEMO_OUT).ply
+	@echo "recording: $(DEMO_OUT)  ground truth: $(DEMO_OUT).truth  world cloud: $(DEMO_OUT).ply"
+
+test: build build-asan
+	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+	cd $(BUILD_ASAN) && ctest --output-on-failure -j $(JOBS) -L unit
+
+bench: build
+	$(BUILD)/tests/bench/hotgauge_bench
+
+format:
+	clang-format -i $$(git ls-files '*.cpp' '*.hpp')
+
+clean:
+	rm -rf $(BUILD) $(BUILD_ASAN)

@@ -1,0 +1,59 @@
+#pragma once
+// The in-memory recording: everything the sensors delivered for one part
+// (docs/recording-format.md). The simulator, the file reader and live acquisition fill it;
+// everything downstream reads it and never knows where it came from.
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace hotgauge::core {
+
+// One scanned face: N profiles of W points each, plus the accelerometer record.
+struct FaceScan {
+    std::string name;  // folder name: top, bottom, side1, side2, ...
+    Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();  // face.yaml camera_to_world
+    Eigen::Vector3d scan_direction = Eigen::Vector3d::UnitY();         // unit, world frame
+    Eigen::Matrix3d R_camera_accel = Eigen::Matrix3d::Identity();      // face.yaml accel_to_camera
+
+    std::int64_t width = 0;                      // W points per profile
+    std::vector<float> profiles_mm;              // N*W*2: (x, z) camera frame, NaN = no return
+    std::vector<std::int64_t> profile_times_ns;  // N, strictly increasing
+    std::vector<double> profile_positions_mm;    // N, travel along scan_direction
+    std::vector<float> accel_mps2;               // K*3, accelerometer axes, gravity included
+    std::vector<std::int64_t> accel_times_ns;    // K, strictly increasing
+
+    std::int64_t n_profiles() const { return static_cast<std::int64_t>(profile_times_ns.size()); }
+    std::int64_t n_accel() const { return static_cast<std::int64_t>(accel_times_ns.size()); }
+    // Profile point (k, i) in the camera frame: (x, 0, z). NaN when there was no return.
+    float x(std::int64_t k, std::int64_t i) const { return profiles_mm[(k * width + i) * 2]; }
+    float z(std::int64_t k, std::int64_t i) const { return profiles_mm[(k * width + i) * 2 + 1]; }
+    Eigen::Vector3d accel(std::int64_t j) const {
+        return {accel_mps2[j * 3], accel_mps2[j * 3 + 1], accel_mps2[j * 3 + 2]};
+    }
+    // Nominal world point (recording-format-v1 "Geometry"):
+    // P = camera_to_world · (x, 0, z, 1)ᵀ + profile_positions[k] · scan_direction.
+    Eigen::Vector3d nominal_world_point(std::int64_t k, std::int64_t i) const {
+        return T_world_camera * Eigen::Vector3d(x(k, i), 0.0, z(k, i)) +
+               profile_positions_mm[k] * scan_direction;
+    }
+};
+
+struct Recording {
+    std::string part_id;
+    std::string recipe;
+    std::string captured_at;              // ISO 8601 UTC
+    std::optional<double> temperature_c;  // absent = unknown
+    std::vector<FaceScan> faces;          // in scan order
+    std::vector<std::string> warnings;    // non-fatal findings of the reader
+
+    const FaceScan* face(const std::string& name) const {
+        for (const auto& f : faces)
+            if (f.name == name) return &f;
+        return nullptr;
+    }
+};
+
+}  // namespace hotgauge::core

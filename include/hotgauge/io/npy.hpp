@@ -1,0 +1,28 @@
+#pragma once
+// NumPy .npy files, format version 1.0 (the version recording format v1 prescribes).
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "hotgauge/core/result.hpp"
+
+namespace hotgauge::io {
+
+struct NpyArray {
+    std::string descr;  // dtype string as in the header, e.g. "<f4"
+    bool fortran_order = false;
+    std::vector<std::int64_t> shape;
+    std::vector<unsigned char> data;  // raw bytes, exactly product(shape) * itemsize
+};
+
+// Reads a .npy file; an Error names the file and what is wrong (missing, not .npy, unsupported
+// version, malformed header, truncated data).
+core::Result<NpyArray> read_npy(const std::filesystem::path& path);
+
+// Writes a .npy v1.0 file in C order. `descr` is a NumPy dtype string ("<f4", "<i8", "<f8").
+core::Result<void> write_npy(const std::filesystem::path& path, const std::string& descr,
+                             const std::vector<std::int64_t>& shape, const void* data,
+                             std::size_t bytes);
+
+}  // namespace hotgauge::io

@@ -1,0 +1,21 @@
+#pragma once
+// Recording format v1 (`hotgauge-recording/1`, docs/recording-format.md) on disk.
+#include <filesystem>
+
+#include "hotgauge/core/recording.hpp"
+#include "hotgauge/core/result.hpp"
+
+namespace hotgauge::io {
+
+inline constexpr const char* kRecordingFormat = "hotgauge-recording/1";
+
+// Reads and checks a recording folder. Every contract violation is an Error naming the file and
+// what is wrong; findings that are allowed but suspicious (accelerometer not covering the scan
+// with 0.5 s margins, non-finite accelerometer samples) go to Recording::warnings.
+core::Result<core::Recording> read_recording(const std::filesystem::path& dir);
+
+// Writes `rec` as a recording folder (created if needed; existing files are overwritten).
+// Checks the same invariants the reader checks before writing anything.
+core::Result<void> write_recording(const core::Recording& rec, const std::filesystem::path& dir);
+
+}  // namespace hotgauge::io

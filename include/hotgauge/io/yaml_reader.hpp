@@ -1,0 +1,56 @@
+#pragma once
+// Strict YAML reading for configs and recipes: every error names file:line and the key, and an
+// unknown key is an error (typos must not pass silently). Used only by the readers of YAML files;
+// modules take plain structs.
+#include <yaml-cpp/yaml.h>
+
+#include <array>
+#include <initializer_list>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace hotgauge::io {
+
+// Thrown inside a reader, caught at its entry point and turned into a core::Error.
+struct YamlError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+class YamlReader {
+  public:
+    explicit YamlReader(std::string file) : file_(std::move(file)) {}
+
+    // Loads the file; throws YamlError("file:line: ...") on I/O or syntax errors.
+    YAML::Node load() const;
+
+    // "file:line: " for a node (1-based line).
+    std::string where(const YAML::Node& node) const;
+
+    // `node` must be a mapping whose keys are all in `allowed`; `what` names it in messages.
+    void expect_map(const YAML::Node& node, const std::string& what,
+                    std::initializer_list<const char*> allowed) const;
+    // A required child; missing -> "file:line: <what>: missing key 'key'".
+    YAML::Node require(const YAML::Node& map, const std::string& what, const char* key) const;
+
+    double number(const YAML::Node& node, const std::string& what) const;
+    std::int64_t integer(const YAML::Node& node, const std::string& what) const;
+    bool boolean(const YAML::Node& node, const std::string& what) const;
+    std::string string(const YAML::Node& node, const std::string& what) const;
+    std::vector<std::string> strings(const YAML::Node& node, const std::string& what) const;
+    std::vector<double> numbers(const YAML::Node& node, const std::string& what,
+                                std::size_t expected_size = 0) const;
+
+    // Shorthands for optional keys with defaults.
+    double number_or(const YAML::Node& map, const std::string& what, const char* key,
+                     double fallback) const;
+
+    [[noreturn]] void fail(const YAML::Node& node, const std::string& message) const;
+
+    const std::string& file() const { return file_; }
+
+  private:
+    std::string file_;
+};
+
+}  // namespace hotgauge::io

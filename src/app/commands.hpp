@@ -1,0 +1,14 @@
+#pragma once
+// Subcommands of the engineer's tool `hotgauge`. Each registers itself on the CLI11 app and
+// returns the process exit code when run.
+#include <CLI/CLI.hpp>
+#include <functional>
+
+namespace hotgauge::app {
+
+using Command = std::function<int()>;
+
+Command add_simulate(CLI::App& app);
+Command add_measure(CLI::App& app);
+
+}  // namespace hotgauge::app

@@ -1,0 +1,24 @@
+# Per-target settings shared by every hotgauge target (style.md §9: no global flags).
+set(CMAKE_EXPORT_COMPILE_COMMANDS ON)
+
+function(hotgauge_target_options target)
+  target_compile_features(${target} PUBLIC cxx_std_20)
+  set_target_properties(${target} PROPERTIES CXX_EXTENSIONS OFF)
+  target_compile_options(${target} PRIVATE -Wall -Wextra -Wpedantic -Wshadow
+                                           -Wnon-virtual-dtor -Wconversion -Wno-sign-conversion)
+  if(HOTGAUGE_SANITIZE)
+    target_compile_options(${target} PUBLIC -fsanitize=address,undefined -fno-omit-frame-pointer
+                                            -fno-sanitize-recover=undefined)
+    target_link_options(${target} PUBLIC -fsanitize=address,undefined)
+  endif()
+endfunction()
+
+# hotgauge_module(NAME SOURCES ... DEPS ...): src/<name>/ -> library hotgauge_<name>.
+function(hotgauge_module name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
+  add_library(hotgauge_${name} STATIC ${ARG_SOURCES})
+  add_library(hotgauge::${name} ALIAS hotgauge_${name})
+  target_include_directories(hotgauge_${name} PUBLIC ${PROJECT_SOURCE_DIR}/include)
+  target_link_libraries(hotgauge_${name} PUBLIC ${ARG_DEPS})
+  hotgauge_target_options(hotgauge_${name})
+endfunction()

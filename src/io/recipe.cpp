@@ -1,0 +1,161 @@
+#include "hotgauge/io/recipe.hpp"
+
+#include <cmath>
+#include <set>
+
+#include "hotgauge/io/yaml_reader.hpp"
+
+namespace hotgauge::io {
+namespace {
+
+using core::FeatureKind;
+using core::FeatureSpec;
+using core::Recipe;
+using core::Section;
+
+// How closely a feature's nominal must agree with the recipe geometry: a typo guard.
+constexpr double kNominalCheckMm = 1e-3;
+
+std::vector<Section> read_sections(const YamlReader& y, const YAML::Node& list,
+                                   const std::string& what, const Recipe& r) {
+    if (!list.IsSequence()) y.fail(list, what + ": expected a list of sections");
+    std::vector<Section> out;
+    for (std::size_t i = 0; i < list.size(); ++i) {
+        const YAML::Node n = list[i];
+        const std::string w = what + "[" + std::to_string(i) + "]";
+        y.expect_map(n, w, {"name", "from", "to", "diameter_mm"});
+        Section s;
+        s.name = y.string(y.require(n, w, "name"), w + ".name");
+        s.from_level = y.string(y.require(n, w, "from"), w + ".from");
+        s.to_level = y.string(y.require(n, w, "to"), w + ".to");
+        s.diameter_mm = y.number(y.require(n, w, "diameter_mm"), w + ".diameter_mm");
+        for (const auto& l : {s.from_level, s.to_level})
+            if (!r.level(l))
+                y.fail(n, w + ": unknown level '" + l + "' (not in geometry.levels_mm)");
+        if (*r.level(s.from_level) >= *r.level(s.to_level))
+            y.fail(n, w + ": level '" + s.from_level + "' must lie below '" + s.to_level + "'");
+        if (s.diameter_mm <= 0.0) y.fail(n, w + ".diameter_mm: must be positive");
+        if (r.section(s.name)) y.fail(n, w + ": duplicate section name '" + s.name + "'");
+        out.push_back(s);
+    }
+    return out;
+}
+
+FeatureSpec read_feature(const YamlReader& y, const YAML::Node& n, const std::string& w,
+                         const Recipe& r) {
+    y.expect_map(n, w,
+                 {"name", "slot", "kind", "faces", "section", "edge_at", "from", "to", "method",
+                  "nominal_mm", "tolerance_mm"});
+    FeatureSpec f;
+    f.name = y.string(y.require(n, w, "name"), w + ".name");
+    f.slot = static_cast<int>(y.integer(y.require(n, w, "slot"), w + ".slot"));
+    if (f.slot < 1) y.fail(n["slot"], w + ".slot: must be >= 1");
+    f.faces = y.strings(y.require(n, w, "faces"), w + ".faces");
+    f.nominal_mm = y.number(y.require(n, w, "nominal_mm"), w + ".nominal_mm");
+    const auto tol = y.numbers(y.require(n, w, "tolerance_mm"), w + ".tolerance_mm", 2);
+    f.tol_lower_mm = tol[0];
+    f.tol_upper_mm = tol[1];
+    if (f.tol_lower_mm > 0.0 || f.tol_upper_mm < 0.0)
+        y.fail(n["tolerance_mm"], w + ".tolerance_mm: expected [lower <= 0, upper >= 0]");
+    const std::string kind = y.string(y.require(n, w, "kind"), w + ".kind");
+    auto level = [&](const char* key) {
+        const std::string l = y.string(y.require(n, w, key), w + "." + key);
+        if (!r.level(l)) y.fail(n[key], w + "." + key + ": unknown level '" + l + "'");
+        return l;
+    };
+    double expected = 0.0;
+    if (kind == "diameter") {
+        f.kind = FeatureKind::kDiameter;
+        f.section = y.string(y.require(n, w, "section"), w + ".section");
+        const Section* s = r.section(f.section);
+        if (!s) y.fail(n["section"], w + ".section: unknown section '" + f.section + "'");
+        f.edge_at = level("edge_at");
+        if (f.edge_at != s->from_level && f.edge_at != s->to_level)
+            y.fail(n["edge_at"], w + ".edge_at: '" + f.edge_at + "' is not an end of section '" +
+                                     f.section + "' (" + s->from_level + ", " + s->to_level + ")");
+        for (const char* k : {"from", "to", "method"})
+            if (n[k]) y.fail(n[k], w + "." + k + ": not used by a diameter feature");
+        expected = s->diameter_mm;
+    } else if (kind == "height") {
+        f.kind = FeatureKind::kHeight;
+        f.from_level = level("from");
+        f.to_level = level("to");
+        const std::string method = n["method"] ? y.string(n["method"], w + ".method") : "planes";
+        if (method == "planes")
+            f.height_method = core::HeightMethod::kPlanes;
+        else if (method == "edges")
+            f.height_method = core::HeightMethod::kEdges;
+        else
+            y.fail(n["method"],
+                   w + ".method: expected 'planes' or 'edges', found '" + method + "'");
+        for (const char* k : {"section", "edge_at"})
+            if (n[k]) y.fail(n[k], w + "." + k + ": not used by a height feature");
+        expected = std::abs(*r.level(f.to_level) - *r.level(f.from_level));
+    } else {
+        y.fail(n["kind"], w + ".kind: expected 'diameter' or 'height', found '" + kind + "'");
+    }
+    if (std::abs(expected - f.nominal_mm) > kNominalCheckMm)
+        y.fail(n["nominal_mm"], w + ".nominal_mm: " + std::to_string(f.nominal_mm) +
+                                    " disagrees with the geometry (" + std::to_string(expected) +
+                                    ")");
+    return f;
+}
+
+}  // namespace
+
+core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
+    const YamlReader y(file.string());
+    try {
+        const YAML::Node root = y.load();
+        y.expect_map(root, "recipe", {"part", "description", "geometry", "material", "features"});
+        Recipe r;
+        r.source = file.string();
+        r.name = y.string(y.require(root, "recipe", "part"), "part");
+
+        const YAML::Node g = y.require(root, "recipe", "geometry");
+        y.expect_map(g, "geometry", {"kind", "levels_mm", "outer", "inner"});
+        const std::string kind = y.string(y.require(g, "geometry", "kind"), "geometry.kind");
+        if (kind != "axisymmetric")
+            y.fail(g["kind"], "geometry.kind: expected 'axisymmetric', found '" + kind + "'");
+        const YAML::Node levels = y.require(g, "geometry", "levels_mm");
+        if (!levels.IsMap() || levels.size() == 0)
+            y.fail(levels, "geometry.levels_mm: expected a mapping of level name to z (mm)");
+        for (const auto& kv : levels) {
+            const auto name = kv.first.as<std::string>();
+            r.levels_mm.emplace_back(name, y.number(kv.second, "geometry.levels_mm." + name));
+        }
+        r.outer = read_sections(y, y.require(g, "geometry", "outer"), "geometry.outer", r);
+        if (g["inner"]) r.inner = read_sections(y, g["inner"], "geometry.inner", r);
+
+        if (const YAML::Node m = root["material"]) {
+            y.expect_map(m, "material", {"alpha0_per_k", "alpha1_per_k2"});
+            r.material.alpha0_per_k =
+                y.number(y.require(m, "material", "alpha0_per_k"), "material.alpha0_per_k");
+            r.material.alpha1_per_k2 = y.number_or(m, "material", "alpha1_per_k2", 0.0);
+        } else {
+            y.fail(root, "recipe: missing key 'material' (the thermal model is required)");
+        }
+
+        const YAML::Node fl = y.require(root, "recipe", "features");
+        if (!fl.IsSequence()) y.fail(fl, "features: expected a list");
+        std::set<std::string> names;
+        std::set<int> slots;
+        for (std::size_t i = 0; i < fl.size(); ++i) {
+            const std::string w = "features[" + std::to_string(i) + "]";
+            FeatureSpec f = read_feature(y, fl[i], w, r);
+            if (!names.insert(f.name).second)
+                y.fail(fl[i], w + ".name: duplicate feature name '" + f.name + "'");
+            if (!slots.insert(f.slot).second)
+                y.fail(fl[i]["slot"], w + ".slot: slot " + std::to_string(f.slot) + " used twice");
+            r.features.push_back(std::move(f));
+        }
+        return r;
+    } catch (const YamlError& e) {
+        return core::make_error(e.what());
+    } catch (const YAML::Exception& e) {
+        return core::make_error(file.string() + ":" + std::to_string(e.mark.line + 1) + ": " +
+                                e.msg);
+    }
+}
+
+}  // namespace hotgauge::io

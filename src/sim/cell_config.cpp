@@ -1,0 +1,190 @@
+#include <cmath>
+
+#include "hotgauge/core/geometry.hpp"
+#include "hotgauge/io/yaml_reader.hpp"
+#include "hotgauge/sim/simulator.hpp"
+
+namespace hotgauge::sim {
+namespace {
+
+using io::YamlReader;
+
+Eigen::Matrix3d rotation(const YamlReader& y, const YAML::Node& n, const std::string& what) {
+    if (!n.IsSequence() || n.size() != 3) y.fail(n, what + ": expected a 3x3 matrix (3 rows)");
+    Eigen::Matrix3d R;
+    for (int r = 0; r < 3; ++r) {
+        const auto row = y.numbers(n[r], what, 3);
+        for (int c = 0; c < 3; ++c) R(r, c) = row[c];
+    }
+    if (!core::is_rotation(R)) y.fail(n, what + ": not a proper rotation (orthonormal, det +1)");
+    return R;
+}
+
+Eigen::Isometry3d pose(const YamlReader& y, const YAML::Node& n, const std::string& what) {
+    if (!n.IsSequence() || n.size() != 4) y.fail(n, what + ": expected a 4x4 matrix (4 rows)");
+    Eigen::Matrix4d M;
+    for (int r = 0; r < 4; ++r) {
+        const auto row = y.numbers(n[r], what, 4);
+        for (int c = 0; c < 4; ++c) M(r, c) = row[c];
+    }
+    if ((M.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 0)
+        y.fail(n, what + ": last row must be [0, 0, 0, 1]");
+    if (!core::is_rotation(M.topLeftCorner<3, 3>()))
+        y.fail(n, what + ": rotation part is not a proper rotation");
+    Eigen::Isometry3d T;
+    T.matrix() = M;
+    return T;
+}
+
+Eigen::Vector3d unit(const YamlReader& y, const YAML::Node& n, const std::string& what) {
+    const auto v = y.numbers(n, what, 3);
+    Eigen::Vector3d e(v[0], v[1], v[2]);
+    if (e.norm() < 1e-9) y.fail(n, what + ": zero vector");
+    return e.normalized();
+}
+
+double positive(const YamlReader& y, const YAML::Node& map, const std::string& what,
+                const char* key, double fallback) {
+    const double v = y.number_or(map, what, key, fallback);
+    if (!(v > 0.0)) y.fail(map[key] ? map[key] : map, what + "." + key + ": must be positive");
+    return v;
+}
+
+double fraction(const YamlReader& y, const YAML::Node& map, const std::string& what,
+                const char* key, double fallback) {
+    const double v = y.number_or(map, what, key, fallback);
+    if (v < 0.0 || v > 1.0) y.fail(map[key], what + "." + key + ": must be in [0, 1]");
+    return v;
+}
+
+}  // namespace
+
+core::Result<CellConfig> read_cell_config(const std::filesystem::path& file) {
+    const YamlReader y(file.string());
+    try {
+        const YAML::Node root = y.load();
+        y.expect_map(root, "cell",
+                     {"sensor", "faces", "vibration", "accelerometer", "placement",
+                      "support_half_size_mm", "face_gap_s"});
+        CellConfig c;
+        c.support_half_size_mm =
+            positive(y, root, "cell", "support_half_size_mm", c.support_half_size_mm);
+        c.face_gap_s = positive(y, root, "cell", "face_gap_s", c.face_gap_s);
+
+        if (const YAML::Node s = root["sensor"]) {
+            const std::string w = "sensor";
+            y.expect_map(s, w,
+                         {"width", "pitch_mm", "standoff_mm", "min_range_mm", "max_range_mm",
+                          "camera_center_mm", "range_noise_mm", "dropout_fraction",
+                          "spike_fraction", "spike_range_mm", "max_incidence_deg", "line_rate_hz"});
+            auto& o = c.sensor;
+            if (s["width"]) o.width = static_cast<int>(y.integer(s["width"], w + ".width"));
+            if (o.width < 2) y.fail(s["width"], w + ".width: must be >= 2");
+            o.pitch_mm = positive(y, s, w, "pitch_mm", o.pitch_mm);
+            o.standoff_mm = positive(y, s, w, "standoff_mm", o.standoff_mm);
+            o.min_range_mm = positive(y, s, w, "min_range_mm", o.min_range_mm);
+            o.max_range_mm = positive(y, s, w, "max_range_mm", o.max_range_mm);
+            if (o.min_range_mm >= o.max_range_mm)
+                y.fail(s, w + ": min_range_mm must be below max_range_mm");
+            if (s["camera_center_mm"]) {
+                const auto v = y.numbers(s["camera_center_mm"], w + ".camera_center_mm", 3);
+                o.camera_center_mm = Eigen::Vector3d(v[0], v[1], v[2]);
+            }
+            o.range_noise_mm = y.number_or(s, w, "range_noise_mm", o.range_noise_mm);
+            if (o.range_noise_mm < 0)
+                y.fail(s["range_noise_mm"], w + ".range_noise_mm: must be >= 0");
+            o.dropout_fraction = fraction(y, s, w, "dropout_fraction", o.dropout_fraction);
+            o.spike_fraction = fraction(y, s, w, "spike_fraction", o.spike_fraction);
+            o.spike_range_mm = positive(y, s, w, "spike_range_mm", o.spike_range_mm);
+            o.max_incidence_deg = positive(y, s, w, "max_incidence_deg", o.max_incidence_deg);
+            o.line_rate_hz = positive(y, s, w, "line_rate_hz", o.line_rate_hz);
+        }
+
+        const YAML::Node faces = y.require(root, "cell", "faces");
+        if (!faces.IsSequence() || faces.size() == 0)
+            y.fail(faces, "faces: expected a non-empty list");
+        for (std::size_t i = 0; i < faces.size(); ++i) {
+            const YAML::Node f = faces[i];
+            const std::string w = "faces[" + std::to_string(i) + "]";
+            y.expect_map(f, w,
+                         {"name", "camera_to_world", "scan_direction", "accel_to_camera",
+                          "scan_length_mm", "profile_spacing_mm", "support_visible"});
+            FaceConfig fc;
+            fc.name = y.string(y.require(f, w, "name"), w + ".name");
+            for (const auto& other : c.faces)
+                if (other.name == fc.name) y.fail(f, w + ".name: duplicate face '" + fc.name + "'");
+            fc.T_world_camera = pose(y, y.require(f, w, "camera_to_world"), w + ".camera_to_world");
+            fc.scan_direction = unit(y, y.require(f, w, "scan_direction"), w + ".scan_direction");
+            if (f["accel_to_camera"])
+                fc.R_camera_accel = rotation(y, f["accel_to_camera"], w + ".accel_to_camera");
+            fc.scan_length_mm = positive(y, f, w, "scan_length_mm", fc.scan_length_mm);
+            fc.profile_spacing_mm = positive(y, f, w, "profile_spacing_mm", fc.profile_spacing_mm);
+            if (f["support_visible"])
+                fc.support_visible = y.boolean(f["support_visible"], w + ".support_visible");
+            c.faces.push_back(fc);
+        }
+
+        if (const YAML::Node v = root["vibration"]) {
+            const std::string w = "vibration";
+            y.expect_map(v, w,
+                         {"enabled", "modes", "blow_period_s", "blow_jitter_s", "amplitude_scatter",
+                          "onset_s", "ambient_rms_mm"});
+            auto& o = c.vibration;
+            if (v["enabled"]) o.enabled = y.boolean(v["enabled"], w + ".enabled");
+            o.blow_period_s = positive(y, v, w, "blow_period_s", o.blow_period_s);
+            o.blow_jitter_s = y.number_or(v, w, "blow_jitter_s", o.blow_jitter_s);
+            o.amplitude_scatter = y.number_or(v, w, "amplitude_scatter", o.amplitude_scatter);
+            o.onset_s = positive(y, v, w, "onset_s", o.onset_s);
+            o.ambient_rms_mm = y.number_or(v, w, "ambient_rms_mm", o.ambient_rms_mm);
+            if (const YAML::Node ms = v["modes"]) {
+                if (!ms.IsSequence()) y.fail(ms, w + ".modes: expected a list");
+                o.modes.clear();
+                for (std::size_t i = 0; i < ms.size(); ++i) {
+                    const std::string wm = w + ".modes[" + std::to_string(i) + "]";
+                    y.expect_map(ms[i], wm,
+                                 {"freq_hz", "damping_ratio", "amplitude_mm", "direction"});
+                    VibrationMode m;
+                    m.freq_hz = positive(y, ms[i], wm, "freq_hz", m.freq_hz);
+                    m.damping_ratio = fraction(y, ms[i], wm, "damping_ratio", m.damping_ratio);
+                    m.amplitude_mm =
+                        y.number(y.require(ms[i], wm, "amplitude_mm"), wm + ".amplitude_mm");
+                    m.direction_world =
+                        unit(y, y.require(ms[i], wm, "direction"), wm + ".direction");
+                    o.modes.push_back(m);
+                }
+            }
+        }
+
+        if (const YAML::Node a = root["accelerometer"]) {
+            const std::string w = "accelerometer";
+            y.expect_map(
+                a, w,
+                {"rate_hz", "noise_density_ug", "bias_mps2", "range_g", "margin_s", "jitter_ns"});
+            auto& o = c.accel;
+            o.rate_hz = positive(y, a, w, "rate_hz", o.rate_hz);
+            o.noise_density_ug = y.number_or(a, w, "noise_density_ug", o.noise_density_ug);
+            o.bias_mps2 = y.number_or(a, w, "bias_mps2", o.bias_mps2);
+            o.range_g = positive(y, a, w, "range_g", o.range_g);
+            o.margin_s = y.number_or(a, w, "margin_s", o.margin_s);
+            o.jitter_ns = y.number_or(a, w, "jitter_ns", o.jitter_ns);
+            if (o.noise_density_ug < 0 || o.bias_mps2 < 0 || o.margin_s < 0 || o.jitter_ns < 0)
+                y.fail(a, w + ": noise_density_ug, bias_mps2, margin_s and jitter_ns must be >= 0");
+        }
+
+        if (const YAML::Node p = root["placement"]) {
+            y.expect_map(p, "placement", {"max_offset_mm", "max_tilt_deg"});
+            c.placement.max_offset_mm =
+                y.number_or(p, "placement", "max_offset_mm", c.placement.max_offset_mm);
+            c.placement.max_tilt_deg =
+                y.number_or(p, "placement", "max_tilt_deg", c.placement.max_tilt_deg);
+        }
+        return c;
+    } catch (const io::YamlError& e) {
+        return core::make_error(e.what());
+    } catch (const YAML::Exception& e) {
+        return core::make_error(file.string() + ":" + std::to_string(e.mark.line + 1) + ": " +
+                                e.msg);
+    }
+}
+
+}  // namespace hotgauge::sim

@@ -1,0 +1,89 @@
+// Recipe reader: hub-a loads; each kind of mistake is an error naming file, line and key.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "hotgauge/io/recipe.hpp"
+
+namespace fs = std::filesystem;
+using hotgauge::io::read_recipe;
+
+namespace {
+
+std::string hub_a_text() {
+    std::ifstream f(HOTGAUGE_SOURCE_DIR "/config/parts/hub-a.yaml");
+    return {std::istreambuf_iterator<char>(f), {}};
+}
+
+// Writes hub-a with `from` replaced by `to` and returns the reader's error message.
+std::string error_after(const std::string& from, const std::string& to) {
+    std::string text = hub_a_text();
+    const auto pos = text.find(from);
+    EXPECT_NE(pos, std::string::npos) << from;
+    text.replace(pos, from.size(), to);
+    const fs::path p =
+        fs::temp_directory_path() / ("hotgauge_recipe_" + std::to_string(::getpid()) + ".yaml");
+    std::ofstream(p) << text;
+    auto r = read_recipe(p);
+    fs::remove(p);
+    EXPECT_FALSE(r) << "accepted a recipe with '" << to << "'";
+    return r ? "" : r.error().message;
+}
+
+}  // namespace
+
+TEST(Recipe, HubALoads) {
+    auto r = read_recipe(HOTGAUGE_SOURCE_DIR "/config/parts/hub-a.yaml");
+    ASSERT_TRUE(r) << r.error().message;
+    EXPECT_EQ(r->name, "hub-a");
+    EXPECT_EQ(r->features.size(), 13u);
+    EXPECT_EQ(r->levels_mm.size(), 7u);
+    EXPECT_EQ(r->outer.size(), 4u);
+    EXPECT_EQ(r->inner.size(), 3u);
+    EXPECT_NEAR(r->material.alpha(1000.0), 1.2e-5 + 3.0e-9 * 980, 1e-15);
+    const auto* d3 = r->section("boss");
+    ASSERT_NE(d3, nullptr);
+    EXPECT_DOUBLE_EQ(d3->diameter_mm, 69.5);
+    EXPECT_FALSE(r->is_inner(*d3));
+    EXPECT_TRUE(r->is_inner(*r->section("through bore")));
+}
+
+TEST(Recipe, UnknownKeyNamesFileLineAndKey) {
+    const auto msg = error_after("alpha1_per_k2: 3.0e-9", "alpha1_per_k2: 3.0e-9\n  alpha2: 1");
+    EXPECT_NE(msg.find("hotgauge_recipe_"), std::string::npos) << msg;
+    EXPECT_NE(msg.find(":29:"), std::string::npos) << msg;  // line of the typo
+    EXPECT_NE(msg.find("unknown key 'alpha2'"), std::string::npos) << msg;
+}
+
+TEST(Recipe, Mistakes) {
+    EXPECT_NE(error_after("edge_at: boss_top,\n     nominal_mm: 69.5",
+                          "edge_at: flange_under,\n     nominal_mm: 69.5")
+                  .find("is not an end of section 'boss'"),
+              std::string::npos);
+    EXPECT_NE(
+        error_after("nominal_mm: 69.5", "nominal_mm: 69.6").find("disagrees with the geometry"),
+        std::string::npos);
+    EXPECT_NE(error_after("section: boss,", "section: bos,").find("unknown section 'bos'"),
+              std::string::npos);
+    EXPECT_NE(error_after("kind: height", "kind: hieght").find("features[7].kind"),
+              std::string::npos);
+    EXPECT_NE(error_after("diameter_mm: 43.9", "diameter_mm: abc").find("expected a finite number"),
+              std::string::npos);
+    EXPECT_NE(error_after("slot: 2,", "slot: 1,").find("used twice"), std::string::npos);
+    EXPECT_NE(
+        error_after("tolerance_mm: [-0.5, 0.5]", "tolerance_mm: [0.5, 0.5]").find("tolerance_mm"),
+        std::string::npos);
+    EXPECT_NE(error_after("from: spigot_end, to: spigot_step", "from: spigot_step, to: spigot_end")
+                  .find("must lie below"),
+              std::string::npos);
+    EXPECT_NE(error_after("part: hub-a", "part: [hub-a").find("YAML syntax error"),
+              std::string::npos);
+}
+
+TEST(Recipe, MissingFile) {
+    auto r = read_recipe("/nonexistent/recipe.yaml");
+    ASSERT_FALSE(r);
+    EXPECT_NE(r.error().message.find("/nonexistent/recipe.yaml: file not found"),
+              std::string::npos);
+}
