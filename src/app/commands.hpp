@@ -10,5 +10,6 @@ using Command = std::function<int()>;
 
 Command add_simulate(CLI::App& app);
 Command add_measure(CLI::App& app);
+Command add_fit(CLI::App& app);
 
 }  // namespace hotgauge::app

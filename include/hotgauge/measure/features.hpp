@@ -1,0 +1,80 @@
+#pragma once
+// From a registered recording to the dimensions a quality engineer signs off: the recipe's
+// features measured in the part frame (docs/measurement.md).
+#include <Eigen/Geometry>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "hotgauge/core/part.hpp"
+#include "hotgauge/core/recording.hpp"
+
+namespace hotgauge::measure {
+
+struct MeasureConfig {
+    double plane_band_mm = 1.0;       // preselection of plane points around the expected level
+    double wall_band_mm = 1.0;        // preselection of wall points around the expected radius
+    double unknown_growth = 0.025;    // relative growth to allow for when T is unknown
+    double support_margin_mm = 0.6;   // keep plane/wall samples this far from their ends
+    double edge_window_mm = 2.5;      // edge search around the expected edge
+    double on_surface_k_sigma = 3.0;  // a sample is on a fitted surface within k·rms ...
+    double on_surface_min_mm = 0.15;  // ... but never tighter than this
+    double normal_edge_deg = 30.0;    // coarse edge: local normal this far from the plane's
+    double fine_window_mm = 1.5;      // fine edge search around the coarse edge circle ...
+    double refine_window_mm = 0.5;    // ... and again around the first fine circle
+    double max_pair_gap_mm = 2.0;     // neighbour samples farther apart do not bracket an edge
+    int min_plane_points = 50;
+    int min_edge_points = 20;
+    double min_arc_deg = 30.0;  // a circle seen on less arc than this is not measured
+    int sectors = 8;            // multiple sampling (paper §4.3): sector fits
+};
+
+enum class Verdict { kOk, kNok, kNotMeasured };
+const char* to_string(Verdict v);
+
+struct FeatureResult {
+    std::string name;
+    core::FeatureKind kind = core::FeatureKind::kDiameter;
+    int slot = 0;
+    std::vector<std::string> faces;
+    Verdict verdict = Verdict::kNotMeasured;
+    std::string reason;             // why not measured / why NOK; empty when OK
+    std::optional<double> hot_mm;   // as measured at the part temperature
+    std::optional<double> cold_mm;  // hot / (1 + α(T)·(T − 20)); needs the temperature
+    double nominal_mm = 0, tol_lower_mm = 0, tol_upper_mm = 0;
+    std::optional<double> deviation_mm;      // cold − nominal
+    double fit_rms_mm = 0;                   // RMS residual of the fit(s) behind the value
+    std::int64_t n_points = 0;               // points behind the value (edge points, plane points)
+    double u_mm = 0;                         // standard uncertainty from the fit(s), hot
+    std::optional<double> sector_spread_mm;  // std of the sector values (multiple sampling)
+    int n_sectors = 0;
+    double arc_deg = 0;  // diameters: angular coverage of the edge points
+};
+
+struct PartMeasurement {
+    std::vector<FeatureResult> features;  // in recipe order
+    Verdict verdict = Verdict::kNotMeasured;
+    std::optional<double> temperature_c;
+    std::optional<double> growth;  // 1 + α(T)·(T − 20) when T is known
+};
+
+// Per-face world displacement of the sensor per profile (compensation); absent = none.
+using FaceDisplacements = std::map<std::string, std::vector<Eigen::Vector3d>>;
+
+// Measures every feature of `recipe` on `rec`, with the part at `T_world_part`.
+// Never throws; what cannot be measured is reported as such with a reason.
+PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& rec,
+                             const Eigen::Isometry3d& T_world_part,
+                             const FaceDisplacements& u_world_mm = {},
+                             const MeasureConfig& config = {});
+
+}  // namespace hotgauge::measure
+
+namespace hotgauge::measure {
+
+// Every feature of `recipe` reported as not measured with `reason` (no pose, no data, ...).
+PartMeasurement unmeasured(const core::Recipe& recipe, const core::Recording& rec,
+                           const std::string& reason);
+
+}  // namespace hotgauge::measure

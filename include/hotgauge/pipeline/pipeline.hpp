@@ -1,0 +1,51 @@
+#pragma once
+// The one pipeline function the offline tool and the daemon share: recording in, part result out
+// (docs/architecture.md). Stages: [compensation] → pose → measurement → thermal scaling.
+#include <Eigen/Geometry>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "hotgauge/core/part.hpp"
+#include "hotgauge/core/recording.hpp"
+#include "hotgauge/measure/features.hpp"
+
+namespace hotgauge::pipeline {
+
+struct PipelineOptions {
+    std::optional<Eigen::Isometry3d> T_world_part;  // known pose (truth file, --part-pose)
+    std::string pose_source;                        // where it came from, for the report
+    measure::MeasureConfig measure;
+};
+
+// What was acquired on one face: enough for an engineer to judge the data before the numbers.
+struct FaceSummary {
+    std::string name;
+    std::int64_t profiles = 0, width = 0, points = 0;
+    double nan_fraction = 0;
+    double scan_s = 0;
+    std::int64_t accel_samples = 0;
+    double accel_rate_hz = 0;
+    std::optional<double> margin_before_s, margin_after_s;  // accelerometer cover of the scan
+};
+FaceSummary summarize(const core::FaceScan& face);
+
+struct PartResult {
+    std::string part_id, recipe, captured_at;
+    std::string pose_source;  // "" when no pose: nothing measured
+    std::vector<FaceSummary> faces;
+    measure::PartMeasurement measurement;
+    std::vector<std::string> warnings;                     // reader findings, degraded conditions
+    std::vector<std::pair<std::string, double>> stage_ms;  // wall time per stage
+};
+
+PartResult run(const core::Recording& rec, const core::Recipe& recipe,
+               const PipelineOptions& options);
+
+// The stable machine interface (docs/measure-output.md): one JSON object.
+std::string to_json(const PartResult& result);
+// The human table, laid out like the paper's Table 2.
+std::string to_table(const PartResult& result);
+
+}  // namespace hotgauge::pipeline

@@ -1,0 +1,175 @@
+#include "hotgauge/pipeline/pipeline.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+namespace hotgauge::pipeline {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t0) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+nlohmann::json opt(const std::optional<double>& v) {
+    return v ? nlohmann::json(*v) : nlohmann::json();
+}
+
+}  // namespace
+
+FaceSummary summarize(const core::FaceScan& f) {
+    FaceSummary s;
+    s.name = f.name;
+    s.profiles = f.n_profiles();
+    s.width = f.width;
+    for (std::size_t q = 0; q + 1 < f.profiles_mm.size(); q += 2)
+        s.points += !std::isnan(f.profiles_mm[q]) && !std::isnan(f.profiles_mm[q + 1]);
+    const double total = static_cast<double>(s.profiles * s.width);
+    s.nan_fraction = total > 0 ? 1.0 - static_cast<double>(s.points) / total : 0.0;
+    if (s.profiles > 1)
+        s.scan_s =
+            static_cast<double>(f.profile_times_ns.back() - f.profile_times_ns.front()) * 1e-9;
+    s.accel_samples = f.n_accel();
+    if (s.accel_samples > 1) {
+        const double span =
+            static_cast<double>(f.accel_times_ns.back() - f.accel_times_ns.front()) * 1e-9;
+        s.accel_rate_hz = static_cast<double>(s.accel_samples - 1) / span;
+        if (s.profiles > 0) {
+            s.margin_before_s =
+                static_cast<double>(f.profile_times_ns.front() - f.accel_times_ns.front()) * 1e-9;
+            s.margin_after_s =
+                static_cast<double>(f.accel_times_ns.back() - f.profile_times_ns.back()) * 1e-9;
+        }
+    }
+    return s;
+}
+
+PartResult run(const core::Recording& rec, const core::Recipe& recipe, const PipelineOptions& o) {
+    PartResult r;
+    r.part_id = rec.part_id;
+    r.recipe = recipe.name;
+    r.captured_at = rec.captured_at;
+    r.warnings = rec.warnings;
+    for (const auto& f : rec.faces) r.faces.push_back(summarize(f));
+    if (rec.recipe != recipe.name)
+        r.warnings.push_back("recording names recipe '" + rec.recipe + "', measured with '" +
+                             recipe.name + "'");
+    if (!o.T_world_part) {
+        r.measurement = measure::unmeasured(
+            recipe, rec, "no part pose: pose estimation is not available yet; give --part-pose");
+        return r;
+    }
+    r.pose_source = o.pose_source;
+    const auto t0 = Clock::now();
+    r.measurement = measure::measure_part(recipe, rec, *o.T_world_part, {}, o.measure);
+    r.stage_ms.emplace_back("measure", ms_since(t0));
+    return r;
+}
+
+std::string to_json(const PartResult& r) {
+    using nlohmann::json;
+    const auto& m = r.measurement;
+    json j;
+    j["part_id"] = r.part_id;
+    j["recipe"] = r.recipe;
+    j["captured_at"] = r.captured_at;
+    j["temperature_c"] = opt(m.temperature_c);
+    j["growth"] = opt(m.growth);
+    j["verdict"] = measure::to_string(m.verdict);
+    j["pose_source"] = r.pose_source.empty() ? json() : json(r.pose_source);
+    j["faces"] = json::array();
+    for (const auto& f : r.faces)
+        j["faces"].push_back({{"name", f.name},
+                              {"profiles", f.profiles},
+                              {"width", f.width},
+                              {"points", f.points},
+                              {"nan_fraction", f.nan_fraction},
+                              {"scan_s", f.scan_s},
+                              {"accel_samples", f.accel_samples},
+                              {"accel_rate_hz", f.accel_rate_hz},
+                              {"accel_margin_before_s", opt(f.margin_before_s)},
+                              {"accel_margin_after_s", opt(f.margin_after_s)}});
+    j["features"] = json::array();
+    for (const auto& f : m.features) {
+        json fj;
+        fj["name"] = f.name;
+        fj["slot"] = f.slot;
+        fj["kind"] = f.kind == core::FeatureKind::kDiameter ? "diameter" : "height";
+        fj["faces"] = f.faces;
+        fj["hot_mm"] = opt(f.hot_mm);
+        fj["cold_mm"] = opt(f.cold_mm);
+        fj["nominal_mm"] = f.nominal_mm;
+        fj["deviation_mm"] = opt(f.deviation_mm);
+        fj["tolerance_mm"] = {f.tol_lower_mm, f.tol_upper_mm};
+        fj["verdict"] = measure::to_string(f.verdict);
+        fj["reason"] = f.reason.empty() ? json() : json(f.reason);
+        const bool measured = f.hot_mm.has_value();
+        fj["fit_rms_mm"] = measured ? json(f.fit_rms_mm) : json();
+        fj["n_points"] = f.n_points;
+        fj["u_mm"] = measured ? json(f.u_mm) : json();
+        fj["sector_spread_mm"] = opt(f.sector_spread_mm);
+        fj["n_sectors"] = f.n_sectors;
+        if (f.kind == core::FeatureKind::kDiameter && measured) fj["arc_deg"] = f.arc_deg;
+        j["features"].push_back(fj);
+    }
+    j["warnings"] = r.warnings;
+    json st = json::object();
+    for (const auto& [k, v] : r.stage_ms) st[k] = v;
+    j["stage_ms"] = st;
+    return j.dump();
+}
+
+std::string to_table(const PartResult& r) {
+    const auto& m = r.measurement;
+    std::string s;
+    char line[256];
+    std::snprintf(line, sizeof line, "part %s  recipe %s  temperature %s  pose %s  verdict %s\n",
+                  r.part_id.c_str(), r.recipe.c_str(),
+                  m.temperature_c ? (std::to_string(*m.temperature_c) + " °C").c_str() : "unknown",
+                  r.pose_source.empty() ? "none" : r.pose_source.c_str(),
+                  measure::to_string(m.verdict));
+    s += line;
+    std::snprintf(line, sizeof line, "%-8s %8s %6s %10s %6s %8s %8s %8s %9s %9s\n", "face",
+                  "profiles", "width", "points", "NaN %", "scan s", "accel", "accel Hz", "before s",
+                  "after s");
+    s += line;
+    for (const auto& f : r.faces) {
+        std::snprintf(
+            line, sizeof line, "%-8s %8lld %6lld %10lld %6.2f %8.3f %8lld %8.1f %9.3f %9.3f\n",
+            f.name.c_str(), static_cast<long long>(f.profiles), static_cast<long long>(f.width),
+            static_cast<long long>(f.points), 100.0 * f.nan_fraction, f.scan_s,
+            static_cast<long long>(f.accel_samples), f.accel_rate_hz,
+            f.margin_before_s.value_or(NAN), f.margin_after_s.value_or(NAN));
+        s += line;
+    }
+    s += "\n";
+    std::snprintf(line, sizeof line, "%-8s %-15s %9s %9s %9s %8s %15s %-12s %7s %7s %7s\n", "face",
+                  "feature", "hot mm", "cold mm", "nominal", "dev mm", "tolerance", "verdict",
+                  "rms mm", "points", "u mm");
+    s += line;
+    for (const auto& f : m.features) {
+        std::string faces;
+        for (const auto& fc : f.faces) faces += (faces.empty() ? "" : ",") + fc;
+        auto num = [](const std::optional<double>& v, const char* fmt) {
+            char b[32];
+            if (!v) return std::string("-");
+            std::snprintf(b, sizeof b, fmt, *v);
+            return std::string(b);
+        };
+        char tol[32];
+        std::snprintf(tol, sizeof tol, "%+.2f/%+.2f", f.tol_lower_mm, f.tol_upper_mm);
+        std::snprintf(
+            line, sizeof line, "%-8s %-15s %9s %9s %9.3f %8s %15s %-12s %7s %7lld %7s\n",
+            faces.c_str(), f.name.c_str(), num(f.hot_mm, "%.3f").c_str(),
+            num(f.cold_mm, "%.3f").c_str(), f.nominal_mm, num(f.deviation_mm, "%+.3f").c_str(), tol,
+            measure::to_string(f.verdict), f.hot_mm ? num(f.fit_rms_mm, "%.3f").c_str() : "-",
+            static_cast<long long>(f.n_points), f.hot_mm ? num(f.u_mm, "%.4f").c_str() : "-");
+        s += line;
+        if (!f.reason.empty()) s += "         └ " + f.reason + "\n";
+    }
+    return s;
+}
+
+}  // namespace hotgauge::pipeline
