@@ -23,6 +23,9 @@ namespace {
 
 constexpr double kProbe = 1e-6;  // mm: how far off a candidate surface membership is tested
 
+// sqrt(x² + y²) without std::hypot's overflow care, which costs 5× and is not needed at mm scale.
+inline double radius(double x, double y) { return std::sqrt(x * x + y * y); }
+
 std::vector<double> sorted_unique(std::vector<double> v) {
     std::sort(v.begin(), v.end());
     v.erase(std::unique(v.begin(), v.end()), v.end());
@@ -34,7 +37,7 @@ double segment_distance(double r, double z, const AxisymmetricSolid::Segment& s)
     const double along = s.cylinder ? z : r;
     const double across = s.cylinder ? r : z;
     const double d_along = along < s.lo ? s.lo - along : (along > s.hi ? along - s.hi : 0.0);
-    return std::hypot(d_along, across - s.value);
+    return radius(d_along, across - s.value);
 }
 
 }  // namespace
@@ -105,7 +108,7 @@ bool AxisymmetricSolid::inside(double r, double z) const {
 }
 
 double AxisymmetricSolid::distance(const Eigen::Vector3d& p) const {
-    const double r = std::hypot(p.x(), p.y());
+    const double r = radius(p.x(), p.y());
     double best = std::numeric_limits<double>::max();
     for (const auto& s : boundary_) best = std::min(best, segment_distance(r, p.z(), s));
     return best;
@@ -145,7 +148,7 @@ std::optional<AxisymmetricSolid::Hit> AxisymmetricSolid::intersect(const Eigen::
             if (d.z() == 0.0) continue;
             const double t = (s.value - o.z()) / d.z();
             if (t <= kMinT || t >= best_t) continue;
-            const double r = std::hypot(o.x() + t * d.x(), o.y() + t * d.y());
+            const double r = radius(o.x() + t * d.x(), o.y() + t * d.y());
             if (r >= s.lo && r <= s.hi) {
                 best_t = t;
                 best = &s;
@@ -156,11 +159,11 @@ std::optional<AxisymmetricSolid::Hit> AxisymmetricSolid::intersect(const Eigen::
     const Eigen::Vector3d p = o + best_t * d;
     Eigen::Vector3d n;
     if (best->cylinder) {
-        const double r = std::hypot(p.x(), p.y());
+        const double r = radius(p.x(), p.y());
         const double sign = inside(best->value - kProbe, p.z()) ? 1.0 : -1.0;
         n = sign * Eigen::Vector3d(p.x() / r, p.y() / r, 0.0);
     } else {
-        const double r = std::hypot(p.x(), p.y());
+        const double r = radius(p.x(), p.y());
         n = Eigen::Vector3d(0, 0, inside(r, best->value - kProbe) ? 1.0 : -1.0);
     }
     return Hit{best_t, n};

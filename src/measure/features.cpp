@@ -23,23 +23,52 @@ using core::FeatureSpec;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 
-// One face's samples in the part frame, on the scan grid (profile k, column i), with a ray model
-// per column: in the camera frame column i's points lie on x = a_i + b_i·z (estimated from the
-// data, so a NaN sample still has a known ray).
+// One face in the part frame. Any sample (profile k, column i) is transformed on demand; the
+// samples near the part (inside its bounding cylinder, with a margin) are kept transformed and
+// bucketed by z, so a query for a level or a z range visits only the samples near it. Each
+// column has a ray model: in the camera frame its points lie on x = a_i + b_i·z (estimated
+// from the data), so a sample without a return still has a known ray.
 struct FaceFrame {
     const core::FaceScan* scan = nullptr;
     std::int64_t n = 0, w = 0;
-    std::vector<Eigen::Vector3f> p;       // part frame; NaN where no return
     Eigen::Matrix3d M;                    // camera -> part rotation
     std::vector<Eigen::Vector3d> origin;  // per profile: camera origin in the part frame
     std::vector<double> col_a, col_b;
     Eigen::Vector3d view;  // camera +z (away from the sensor), part frame
 
+    struct Near {
+        std::int32_t q;     // k·w + i
+        Eigen::Vector3f p;  // part frame
+        float r;            // distance from the part axis
+    };
+    static constexpr double kBucketMm = 0.5;
+    double z0 = 0;
+    std::vector<Near> near;            // ordered by z bucket
+    std::vector<std::int64_t> bucket;  // start of each bucket in `near`, plus an end sentinel
+
+    // Calls f(const Near&) for the near-part samples with z in about [lo, hi] (whole buckets:
+    // callers check exact bounds).
+    template <class F>
+    void for_z(double lo, double hi, F&& f) const {
+        const auto nb = static_cast<std::int64_t>(bucket.size()) - 1;
+        if (nb < 1 || hi < lo) return;
+        const auto b0 = std::clamp<std::int64_t>(
+            static_cast<std::int64_t>(std::floor((lo - z0) / kBucketMm)), 0, nb - 1);
+        const auto b1 = std::clamp<std::int64_t>(
+            static_cast<std::int64_t>(std::floor((hi - z0) / kBucketMm)), 0, nb - 1);
+        for (std::int64_t j = bucket[b0]; j < bucket[b1 + 1]; ++j) f(near[j]);
+    }
+
     bool valid(std::int64_t k, std::int64_t i) const {
-        return k >= 0 && k < n && i >= 0 && i < w && !std::isnan(p[k * w + i].x());
+        return k >= 0 && k < n && i >= 0 && i < w && !std::isnan(scan->x(k, i)) &&
+               !std::isnan(scan->z(k, i));
     }
     Eigen::Vector3d point(std::int64_t k, std::int64_t i) const {
-        return p[k * w + i].cast<double>();
+        return M * Eigen::Vector3d(scan->x(k, i), 0.0, scan->z(k, i)) + origin[k];
+    }
+    double radius(std::int64_t k, std::int64_t i) const {
+        const Eigen::Vector3d p = point(k, i);
+        return std::sqrt(p.x() * p.x() + p.y() * p.y());
     }
     double range(std::int64_t k, std::int64_t i) const { return scan->z(k, i); }
     // The ray of sample (k, i) as o + s·d, s = camera z.
@@ -51,49 +80,35 @@ struct FaceFrame {
     }
 };
 
-void fit_columns(const core::FaceScan& f, std::vector<double>& a, std::vector<double>& b) {
-    const std::int64_t n = f.n_profiles(), w = f.width;
+// Per-column sums of the camera-frame samples, for the least-squares ray line x = a + b·z of
+// each column. A sensor computes (x, z) from (column, row) through its calibration, so every
+// sample of a column lies on that column's ray whatever it hit: one pass, no outliers to reject.
+struct ColumnSums {
+    double s = 0, sz = 0, sx = 0, szz = 0, szx = 0;
+    void add(double x, double z) {
+        s += 1;
+        sz += z;
+        sx += x;
+        szz += z * z;
+        szx += z * x;
+    }
+};
+
+void fit_columns(const std::vector<ColumnSums>& sums, std::vector<double>& a,
+                 std::vector<double>& b) {
+    const auto w = static_cast<std::int64_t>(sums.size());
     a.assign(w, kNaN);
     b.assign(w, kNaN);
     std::vector<double> mean_x(w, kNaN), mean_z(w, kNaN);
     for (std::int64_t i = 0; i < w; ++i) {
-        // Two passes: least squares, then again without samples beyond 4σ of the first line.
-        double la = 0.0, lb = 0.0, lim = std::numeric_limits<double>::max();
-        for (int pass = 0; pass < 2; ++pass) {
-            double s = 0, sz = 0, sx = 0, szz = 0, szx = 0, sr2 = 0;
-            for (std::int64_t k = 0; k < n; ++k) {
-                const double x = f.x(k, i), z = f.z(k, i);
-                if (std::isnan(x) || std::isnan(z)) continue;
-                const double res = x - (la + lb * z);
-                if (pass == 1 && std::abs(res) > lim) continue;
-                s += 1;
-                sz += z;
-                sx += x;
-                szz += z * z;
-                szx += z * x;
-                sr2 += res * res;
-            }
-            if (s < 1) break;
-            mean_x[i] = sx / s;
-            mean_z[i] = sz / s;
-            const double var_z = szz / s - mean_z[i] * mean_z[i];
-            if (s < 10 || var_z < 1.0) break;  // depth spread too small to see the ray's slope
-            lb = (szx / s - mean_x[i] * mean_z[i]) / var_z;
-            la = mean_x[i] - lb * mean_z[i];
-            a[i] = la;
-            b[i] = lb;
-            if (pass == 0) {
-                // residuals of pass 0 were against the zero line; recompute the spread
-                double r2 = 0;
-                for (std::int64_t k = 0; k < n; ++k) {
-                    const double x = f.x(k, i), z = f.z(k, i);
-                    if (std::isnan(x) || std::isnan(z)) continue;
-                    r2 += (x - la - lb * z) * (x - la - lb * z);
-                }
-                lim = 4.0 * std::sqrt(r2 / s) + 1e-3;
-            }
-            (void)sr2;
-        }
+        const ColumnSums& c = sums[i];
+        if (c.s < 1) continue;
+        mean_x[i] = c.sx / c.s;
+        mean_z[i] = c.sz / c.s;
+        const double var_z = c.szz / c.s - mean_z[i] * mean_z[i];
+        if (c.s < 10 || var_z < 1.0) continue;  // too little depth spread to see the slope
+        b[i] = (c.szx / c.s - mean_x[i] * mean_z[i]) / var_z;
+        a[i] = mean_x[i] - b[i] * mean_z[i];
     }
     // Columns without a determined slope: interpolate the slope between determined neighbours
     // (the fan's slope varies smoothly across the line), keep their own mean point when any.
@@ -129,8 +144,26 @@ void fit_columns(const core::FaceScan& f, std::vector<double>& a, std::vector<do
     }
 }
 
+// Counting sort of the near-part samples by z bucket.
+void bucket_by_z(FaceFrame& fr, std::vector<FaceFrame::Near> near, double z_lo, double z_hi) {
+    const auto nb = static_cast<std::int64_t>((z_hi - z_lo) / FaceFrame::kBucketMm) + 1;
+    fr.z0 = z_lo;
+    auto index = [&](float z) {
+        return std::clamp<std::int64_t>(
+            static_cast<std::int64_t>((z - z_lo) / FaceFrame::kBucketMm), 0, nb - 1);
+    };
+    fr.bucket.assign(static_cast<std::size_t>(nb + 1), 0);
+    for (const auto& s : near) ++fr.bucket[index(s.p.z()) + 1];
+    for (std::int64_t b = 0; b < nb; ++b) fr.bucket[b + 1] += fr.bucket[b];
+    fr.near.resize(near.size());
+    std::vector<std::int64_t> fill(fr.bucket.begin(), fr.bucket.end() - 1);
+    for (const auto& s : near) fr.near[fill[index(s.p.z())]++] = s;
+}
+
+// `r_max`, `z_lo`, `z_hi`: the part's bounding cylinder (hot, with margin), part frame.
 FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_world,
-                     const std::vector<Eigen::Vector3d>* u) {
+                     const std::vector<Eigen::Vector3d>* u, double r_max, double z_lo,
+                     double z_hi) {
     FaceFrame fr;
     fr.scan = &f;
     fr.n = f.n_profiles();
@@ -138,8 +171,9 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
     fr.M = T_part_world.linear() * f.T_world_camera.linear();
     fr.view = fr.M.col(2);
     fr.origin.resize(fr.n);
-    fr.p.resize(static_cast<std::size_t>(fr.n * fr.w));
-    const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN());
+    std::vector<FaceFrame::Near> near;
+    std::vector<ColumnSums> columns(static_cast<std::size_t>(fr.w));
+    const double r2_max = r_max * r_max;
     for (std::int64_t k = 0; k < fr.n; ++k) {
         Eigen::Vector3d t =
             f.T_world_camera.translation() + f.profile_positions_mm[k] * f.scan_direction;
@@ -147,13 +181,17 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
         fr.origin[k] = T_part_world * t;
         for (std::int64_t i = 0; i < fr.w; ++i) {
             const float x = f.x(k, i), z = f.z(k, i);
-            fr.p[k * fr.w + i] =
-                (std::isnan(x) || std::isnan(z))
-                    ? nan3
-                    : (fr.M * Eigen::Vector3d(x, 0.0, z) + fr.origin[k]).cast<float>();
+            if (std::isnan(x) || std::isnan(z)) continue;
+            columns[i].add(x, z);
+            const Eigen::Vector3d p = fr.M * Eigen::Vector3d(x, 0.0, z) + fr.origin[k];
+            const double r2 = p.x() * p.x() + p.y() * p.y();
+            if (r2 > r2_max || p.z() < z_lo || p.z() > z_hi) continue;
+            near.push_back({static_cast<std::int32_t>(k * fr.w + i), p.cast<float>(),
+                            static_cast<float>(std::sqrt(r2))});
         }
     }
-    fit_columns(f, fr.col_a, fr.col_b);
+    fit_columns(columns, fr.col_a, fr.col_b);
+    bucket_by_z(fr, std::move(near), z_lo, z_hi);
     return fr;
 }
 
@@ -204,25 +242,39 @@ PlaneResult fit_level_plane(const std::vector<const FaceFrame*>& frames, double 
     PlaneResult out;
     std::vector<Eigen::Vector3d> cand;
     for (const FaceFrame* fr : frames)
-        for (std::size_t q = 0; q < fr->p.size(); ++q) {
-            const Eigen::Vector3f& p = fr->p[q];
-            if (std::isnan(p.x()) || std::abs(p.z() - z_e) > band) continue;
-            const double r = std::hypot(p.x(), p.y());
-            if (r >= r_lo && r <= r_hi) cand.push_back(p.cast<double>());
-        }
+        fr->for_z(z_e - band, z_e + band, [&](const FaceFrame::Near& s) {
+            if (std::abs(s.p.z() - z_e) <= band && s.r >= r_lo && s.r <= r_hi)
+                cand.push_back(s.p.cast<double>());
+        });
     if (static_cast<int>(cand.size()) < c.min_plane_points) {
         out.error =
             what + ": only " + std::to_string(cand.size()) + " points where the plane should be";
         return out;
     }
-    auto seed = ransac_plane(cand, {std::max(c.on_surface_min_mm, 0.1), 100, 7});
+    // A plane is known to a fraction of a micrometre from tens of thousands of points: beyond
+    // that, an even subsample keeps the fit's cost bounded.
+    constexpr std::size_t kMaxPlanePoints = 20000;
+    if (cand.size() > kMaxPlanePoints) {
+        const std::size_t keep_every = (cand.size() + kMaxPlanePoints - 1) / kMaxPlanePoints;
+        std::size_t m = 0;
+        for (std::size_t q = 0; q < cand.size(); q += keep_every) cand[m++] = cand[q];
+        cand.resize(m);
+    }
+    // RANSAC scores hypotheses on an even subsample (a few thousand points decide a plane as
+    // well as a few hundred thousand); all candidates are then classified against its plane.
+    constexpr std::size_t kRansacPoints = 4000;
+    const double ransac_thr = std::max(c.on_surface_min_mm, 0.1);
+    std::vector<Eigen::Vector3d> sub;
+    const std::size_t stride = std::max<std::size_t>(1, cand.size() / kRansacPoints);
+    for (std::size_t q = 0; q < cand.size(); q += stride) sub.push_back(cand[q]);
+    auto seed = ransac_plane(sub, {ransac_thr, 100, 7});
     if (!seed) {
         out.error = what + ": " + seed.error().message;
         return out;
     }
     std::vector<Eigen::Vector3d> in;
-    for (std::size_t q = 0; q < cand.size(); ++q)
-        if (seed->inlier[q]) in.push_back(cand[q]);
+    for (const auto& p : cand)
+        if (std::abs(seed->fit.distance(p)) <= ransac_thr) in.push_back(p);
     auto fit = fit_plane_robust(in, {c.on_surface_k_sigma, 0.0, 10});
     if (!fit) {
         out.error = what + ": " + fit.error().message;
@@ -315,6 +367,18 @@ std::optional<Eigen::Vector3d> grid_normal(const FaceFrame& fr, std::int64_t k, 
     S = S / cnt - mean * mean.transpose();
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(S);
     return es.eigenvectors().col(0);
+}
+
+// True when every valid sample of the 5×5 grid neighbourhood is on the plane: its normal is the
+// plane's, no need to compute it.
+bool flat_around(const FaceFrame& fr, const PlaneFit& plane, double thr, std::int64_t k,
+                 std::int64_t i) {
+    for (std::int64_t dk = -2; dk <= 2; ++dk)
+        for (std::int64_t di = -2; di <= 2; ++di)
+            if (fr.valid(k + dk, i + di) &&
+                std::abs(plane.distance(fr.point(k + dk, i + di))) > thr)
+                return false;
+    return true;
 }
 
 double angle_of(const Eigen::Vector2d& v) { return std::atan2(v.y(), v.x()); }
@@ -593,13 +657,13 @@ class FeatureMeasurer {
         const double cos_edge = std::cos(c_.normal_edge_deg / kRadToDeg);
         for (std::size_t fi = 0; fi < frames.size(); ++fi) {
             const FaceFrame& fr = *frames[fi];
-            for (std::int64_t q = 0; q < fr.n * fr.w; ++q) {
-                const Eigen::Vector3f& pf = fr.p[q];
-                if (std::isnan(pf.x())) continue;
-                const double rr = std::hypot(pf.x(), pf.y());
-                if (std::abs(rr - R_e) > win) continue;
-                const Eigen::Vector3d p = pf.cast<double>();
-                if (std::abs(plane.distance(p)) > thr) continue;
+            // On-plane samples lie within the plane's preselection band of its level.
+            const double band = ex_.tol(c_.plane_band_mm, *recipe_.level(f.edge_at));
+            fr.for_z(plane.point.z() - band, plane.point.z() + band, [&](const FaceFrame::Near& s) {
+                if (std::abs(s.r - R_e) > win) return;
+                const std::int64_t q = s.q;
+                const Eigen::Vector3d p = s.p.cast<double>();
+                if (std::abs(plane.distance(p)) > thr) return;
                 seeds[fi].push_back(q);
                 const std::int64_t k = q / fr.w, i = q % fr.w;
                 // A neighbour beyond: no return, or farther from the sensor than the plane.
@@ -608,12 +672,12 @@ class FeatureMeasurer {
                     if (!fr.valid(k + nb[0], i + nb[1]) ||
                         plane.distance(fr.point(k + nb[0], i + nb[1])) < -thr)
                         edge = true;
-                if (!edge) {
+                if (!edge && !flat_around(fr, plane, thr, k, i)) {
                     const auto nrm = grid_normal(fr, k, i);
                     edge = nrm && std::abs(nrm->dot(plane.normal)) < cos_edge;
                 }
                 if (edge) coarse.push_back(to2d(p));
-            }
+            });
         }
         if (static_cast<int>(coarse.size()) < c_.min_edge_points) {
             r.reason = "edge of '" + f.section + "' at '" + f.edge_at + "': only " +
@@ -795,11 +859,10 @@ class FeatureMeasurer {
         // Wall radius about the part axis (the pose gives the axis).
         std::vector<double> radii;
         for (const auto* fr : frames)
-            for (const auto& pf : fr->p) {
-                if (std::isnan(pf.x()) || pf.z() < z_lo || pf.z() > z_hi) continue;
-                const double rr = std::hypot(pf.x(), pf.y());
-                if (std::abs(rr - R_e) <= band) radii.push_back(rr);
-            }
+            fr->for_z(z_lo, z_hi, [&](const FaceFrame::Near& s) {
+                if (s.p.z() >= z_lo && s.p.z() <= z_hi && std::abs(s.r - R_e) <= band)
+                    radii.push_back(s.r);
+            });
         if (static_cast<int>(radii.size()) < c_.min_plane_points) {
             why = "wall at level '" + level + "': only " + std::to_string(radii.size()) + " points";
             return false;
@@ -811,14 +874,13 @@ class FeatureMeasurer {
             const FaceFrame& fr = *frp;
             std::vector<std::int64_t> seeds;
             auto on = [&](std::int64_t k, std::int64_t i) {
-                const Eigen::Vector3f& p = fr.p[k * fr.w + i];
-                return std::abs(std::hypot(p.x(), p.y()) - rw.mean) <= thr;
+                return std::abs(fr.radius(k, i) - rw.mean) <= thr;
             };
-            for (std::int64_t q = 0; q < fr.n * fr.w; ++q) {
-                const Eigen::Vector3f& p = fr.p[q];
-                if (std::isnan(p.x()) || std::abs(p.z() - L_e) > win) continue;
-                if (on(q / fr.w, q % fr.w)) seeds.push_back(q);
-            }
+            fr.for_z(L_e - win, L_e + win, [&](const FaceFrame::Near& s) {
+                const std::int64_t q = s.q;
+                if (std::abs(s.p.z() - L_e) <= win && std::abs(s.r - rw.mean) <= thr)
+                    seeds.push_back(q);
+            });
             auto cross = [&](std::int64_t k, std::int64_t i) {
                 return cross_cylinder(rw.mean, fr.ray_origin(k, i), fr.ray_dir(i));
             };
@@ -947,11 +1009,23 @@ PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& 
         ex.slack = 0.5 * config.unknown_growth;
     }
     const Eigen::Isometry3d T_part_world = T_world_part.inverse();
+    // The part's bounding cylinder, hot, with room for an unknown temperature and edge windows.
+    const AxisymmetricSolid nominal = AxisymmetricSolid::from_recipe(recipe);
+    double z_min = 0.0, z_max = 0.0;
+    for (const auto& [name, z] : recipe.levels_mm) {
+        z_min = std::min(z_min, z);
+        z_max = std::max(z_max, z);
+    }
+    const double margin = 5.0;
+    const double gmax = ex.g * (1.0 + ex.slack);
     std::map<std::string, FaceFrame> frames;
     for (const auto& face : rec.faces) {
         auto it = u.find(face.name);
-        frames.emplace(face.name,
-                       make_frame(face, T_part_world, it == u.end() ? nullptr : &it->second));
+        frames.emplace(
+            face.name,
+            make_frame(face, T_part_world, it == u.end() ? nullptr : &it->second,
+                       nominal.max_radius() * gmax + margin, std::min(z_min, z_min * gmax) - margin,
+                       std::max(z_max, z_max * gmax) + margin));
     }
     FeatureMeasurer m(recipe, frames, ex, config);
     for (const auto& spec : recipe.features) {

@@ -53,4 +53,18 @@ BENCHMARK(BM_MeasurePart4Faces)->Unit(benchmark::kMillisecond)->MinTime(2.0);
 
 }  // namespace
 
+namespace {
+// The shared preparation alone (part-frame grid, ray model per column): a recipe with no features.
+void BM_MeasurePrepareOnly(benchmark::State& state) {
+    const Scene& s = scene();
+    core::Recipe empty = s.recipe;
+    empty.features.clear();
+    for (auto _ : state) {
+        auto m = measure::measure_part(empty, s.sim.recording, s.sim.truth.T_world_part);
+        benchmark::DoNotOptimize(m);
+    }
+}
+BENCHMARK(BM_MeasurePrepareOnly)->Unit(benchmark::kMillisecond)->MinTime(1.0);
+}  // namespace
+
 BENCHMARK_MAIN();
