@@ -27,12 +27,58 @@ done
 grep -q "part T-1  recipe hub-a" "$tmp/measure.out" || fail "header line missing"
 head -c 200 "$tmp/cloud.ply" | grep -q "format binary_little_endian 1.0" || fail "PLY header"
 
+# The JSON interface (docs/measure-output.md): every feature, the documented keys, and the
+# values a checker can recompute; with --part-pose from a file elsewhere.
+cp "$tmp/rec.truth/part_pose.yaml" "$tmp/pose.yaml"
+"$bin" measure "$tmp/rec" --json --part-pose "$tmp/pose.yaml" > "$tmp/m.json"
+/usr/bin/python3 - "$tmp/m.json" "$tmp/rec.truth/truth.yaml" <<'PY' || fail "JSON interface"
+import json, sys, yaml
+m = json.load(open(sys.argv[1]))
+truth = {f["name"]: f for f in yaml.safe_load(open(sys.argv[2]))["features"]}
+for key in ("part_id", "recipe", "temperature_c", "verdict", "features"):
+    assert key in m, key
+assert m["part_id"] == "T-1" and m["recipe"] == "hub-a" and m["temperature_c"] == 900
+assert m["pose_source"].endswith("pose.yaml"), m["pose_source"]
+names = [f["name"] for f in m["features"]]
+assert names == list(truth), names
+for f in m["features"]:
+    for key in ("name", "hot_mm", "cold_mm", "nominal_mm", "deviation_mm", "verdict", "reason",
+                "fit_rms_mm", "n_points", "u_mm"):
+        assert key in f, (f["name"], key)
+    assert f["verdict"] in ("OK", "NOK", "NOT_MEASURED")
+    if f["hot_mm"] is None:
+        assert f["verdict"] == "NOT_MEASURED" and f["reason"], f
+        continue
+    assert abs(f["deviation_mm"] - (f["cold_mm"] - f["nominal_mm"])) < 1e-9
+    # quick mode (1.6 mm rays): coarse, but the numbers must still be the part's
+    assert abs(f["hot_mm"] - truth[f["name"]]["hot_mm"]) < 0.5, (f["name"], f["hot_mm"])
+print("json ok:", sum(f["hot_mm"] is not None for f in m["features"]), "features measured")
+PY
+
+# No pose at all (no truth beside the recording, no --part-pose): nothing is measured, and
+# every feature says why.
+mv "$tmp/rec.truth" "$tmp/truth.moved"
+"$bin" measure "$tmp/rec" --json > "$tmp/nopose.json"
+/usr/bin/python3 - "$tmp/nopose.json" <<'PY' || fail "no pose must mean not measured"
+import json, sys
+m = json.load(open(sys.argv[1]))
+assert m["verdict"] == "NOT_MEASURED"
+assert all(f["hot_mm"] is None and "pose" in f["reason"] for f in m["features"])
+PY
+mv "$tmp/truth.moved" "$tmp/rec.truth"
+
 # Bad input: a clear message naming the file, exit code 1, no crash.
 set +e
 "$bin" measure "$tmp/nothing" 2> "$tmp/err"; rc=$?
 set -e
 [ $rc -eq 1 ] || fail "measure of a missing recording exited $rc, expected 1"
 grep -q "$tmp/nothing/part.yaml" "$tmp/err" || fail "error does not name the file: $(cat "$tmp/err")"
+printf 'world_from_part: [[1,0,0,0],[0,1,0,0],[0,0,2,0],[0,0,0,1]]\n' > "$tmp/bad_pose.yaml"
+set +e
+"$bin" measure "$tmp/rec" --part-pose "$tmp/bad_pose.yaml" 2> "$tmp/err"; rc=$?
+set -e
+[ $rc -eq 1 ] || fail "measure with a non-rigid pose exited $rc"
+grep -q "bad_pose.yaml:1: world_from_part: not a proper rotation" "$tmp/err" || fail "pose error: $(cat "$tmp/err")"
 rm "$tmp/rec/top/profile_times.npy"
 set +e
 "$bin" measure "$tmp/rec" 2> "$tmp/err"; rc=$?

@@ -81,6 +81,15 @@ TEST(Recipe, Mistakes) {
               std::string::npos);
 }
 
+TEST(Recipe, MeshFileMustExistAndBePlyOrStl) {
+    EXPECT_NE(error_after("kind: axisymmetric", "kind: axisymmetric\n  mesh_file: hub-a.obj")
+                  .find("expected a .ply or .stl file"),
+              std::string::npos);
+    EXPECT_NE(error_after("kind: axisymmetric", "kind: axisymmetric\n  mesh_file: nowhere.stl")
+                  .find("nowhere.stl not found"),
+              std::string::npos);
+}
+
 TEST(Recipe, MissingFile) {
     auto r = read_recipe("/nonexistent/recipe.yaml");
     ASSERT_FALSE(r);

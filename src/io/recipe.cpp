@@ -113,7 +113,18 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
         r.name = y.string(y.require(root, "recipe", "part"), "part");
 
         const YAML::Node g = y.require(root, "recipe", "geometry");
-        y.expect_map(g, "geometry", {"kind", "levels_mm", "outer", "inner"});
+        y.expect_map(g, "geometry", {"kind", "levels_mm", "outer", "inner", "mesh_file"});
+        if (g["mesh_file"]) {
+            // Relative to the recipe's folder; the surface model for matching (PLY or STL).
+            std::filesystem::path mesh = y.string(g["mesh_file"], "geometry.mesh_file");
+            if (mesh.is_relative()) mesh = file.parent_path() / mesh;
+            const auto ext = mesh.extension().string();
+            if (ext != ".ply" && ext != ".stl" && ext != ".PLY" && ext != ".STL")
+                y.fail(g["mesh_file"], "geometry.mesh_file: expected a .ply or .stl file");
+            if (!std::filesystem::exists(mesh))
+                y.fail(g["mesh_file"], "geometry.mesh_file: " + mesh.string() + " not found");
+            r.mesh_file = mesh.string();
+        }
         const std::string kind = y.string(y.require(g, "geometry", "kind"), "geometry.kind");
         if (kind != "axisymmetric")
             y.fail(g["kind"], "geometry.kind: expected 'axisymmetric', found '" + kind + "'");

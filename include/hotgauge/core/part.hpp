@@ -47,7 +47,8 @@ struct FeatureSpec {
 
 struct Recipe {
     std::string name;
-    std::string source;                                     // file it came from, for messages
+    std::string source;     // file it came from, for messages
+    std::string mesh_file;  // optional surface model (PLY/STL), absolute path; "" if none
     std::vector<std::pair<std::string, double>> levels_mm;  // named z levels, part frame, cold
     std::vector<Section> outer, inner;
     ThermalModel material;
