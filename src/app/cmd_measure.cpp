@@ -23,6 +23,9 @@ struct MeasureArgs {
     std::string part_pose;  // default: REC.truth/part_pose.yaml when present
     std::string ply;
     bool json = false;
+    bool no_compensation = false;
+    double clock_offset_ms = 0.0;
+    double highpass_hz = 0.0;
 };
 
 int run(const MeasureArgs& a) {
@@ -40,6 +43,9 @@ int run(const MeasureArgs& a) {
         return 1;
     }
     pipeline::PipelineOptions opt;
+    opt.compensate = !a.no_compensation;
+    opt.compensation.clock_offset_s = a.clock_offset_ms * 1e-3;
+    if (a.highpass_hz > 0) opt.compensation.highpass_hz = a.highpass_hz;
     std::string pose_file = a.part_pose;
     if (pose_file.empty()) {
         const fs::path truth =
@@ -87,6 +93,12 @@ Command add_measure(CLI::App& app) {
     s->add_option("--part-pose", a->part_pose,
                   "part pose file (world_from_part); default REC.truth/part_pose.yaml if present");
     s->add_flag("--json", a->json, "print one JSON object (docs/measure-output.md)");
+    s->add_flag("--no-compensation", a->no_compensation, "measure without vibration compensation");
+    s->add_option("--clock-offset-ms", a->clock_offset_ms,
+                  "accelerometer clock minus camera clock, ms")
+        ->capture_default_str();
+    s->add_option("--highpass-hz", a->highpass_hz,
+                  "compensation high-pass corner, Hz (default 1.5)");
     s->add_option("--ply", a->ply, "write the world cloud of all faces as binary PLY");
     return [a] { return run(*a); };
 }

@@ -10,6 +10,7 @@ using Command = std::function<int()>;
 
 Command add_simulate(CLI::App& app);
 Command add_measure(CLI::App& app);
+Command add_table1(CLI::App& app);
 Command add_fit(CLI::App& app);
 
 }  // namespace hotgauge::app

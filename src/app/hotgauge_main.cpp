@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
     };
     add(hotgauge::app::add_simulate);
     add(hotgauge::app::add_measure);
+    add(hotgauge::app::add_table1);
     add(hotgauge::app::add_fit);
     try {
         app.parse(argc, argv);

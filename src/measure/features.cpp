@@ -616,9 +616,16 @@ class FeatureMeasurer {
                             const std::vector<const FaceFrame*>& frames) {
         const double z = *recipe_.level(level);
         const double m = c_.support_margin_mm;
-        return fit_level_plane(frames, ex_.z(z), ex_.tol(c_.plane_band_mm, z),
-                               ex_.z(a.lo) + ex_.tol(m, a.lo), ex_.z(a.hi) - ex_.tol(m, a.hi), c_,
-                               "plane at level '" + level + "'");
+        PlaneResult pl = fit_level_plane(
+            frames, ex_.z(z), ex_.tol(c_.plane_band_mm, z), ex_.z(a.lo) + ex_.tol(m, a.lo),
+            ex_.z(a.hi) - ex_.tol(m, a.hi), c_, "plane at level '" + level + "'");
+        if (pl.error.empty()) {
+            const double tilt = std::acos(std::min(1.0, std::abs(pl.fit.normal.z()))) * kRadToDeg;
+            if (tilt > c_.max_plane_tilt_deg)
+                pl.error = "plane at level '" + level + "' is tilted " + std::to_string(tilt) +
+                           "° from the part axis: wrong pose or wrong part";
+        }
+        return pl;
     }
 
     void diameter(const FeatureSpec& f, const std::vector<const FaceFrame*>& frames,
@@ -767,12 +774,42 @@ class FeatureMeasurer {
             if (fit->inlier[q]) inlier_brackets.push_back(fine_brackets[q]);
         const BracketCircle bc =
             fit_circle_brackets(inlier_brackets, fit->fit.center, fit->fit.radius);
-        r.hot_mm = 2.0 * bc.radius;
+        // The circle's centre must lie on the part axis (the pose put it there) and its radius in
+        // the window: otherwise these are not the edge's points.
+        const Eigen::Vector3d centre = plane.point + bc.center.x() * e1 + bc.center.y() * e2;
+        const double off_axis = centre.head<2>().norm();
+        if (off_axis > c_.max_axis_offset_mm || std::abs(bc.radius - R_e) > win) {
+            r.reason = "edge circle of '" + f.section + "' is " + std::to_string(off_axis) +
+                       " mm off the part axis, radius " + std::to_string(bc.radius) +
+                       " mm: wrong pose or wrong part";
+            return;
+        }
         r.fit_rms_mm = fit->fit.rms_mm;
         r.n_points = fit->fit.n_points;
-        // Conservative: the statistical figure of the midpoint fit, plus how far the bracket
-        // constraints had to move it (the sampling grid's share).
-        r.u_mm = 2.0 * std::hypot(fit->fit.u_radius_mm, bc.radius - fit->fit.radius);
+        if (r.arc_deg >= c_.free_centre_min_arc_deg) {
+            r.hot_mm = 2.0 * bc.radius;
+            // Conservative: the statistical figure of the midpoint fit, plus how far the bracket
+            // constraints had to move it (the sampling grid's share).
+            r.u_mm = 2.0 * std::hypot(fit->fit.u_radius_mm, bc.radius - fit->fit.radius);
+        } else {
+            // On a partial arc the centre and the radius trade off (the arc's chord direction is
+            // weakly determined): take the centre from the part axis, which the pose gives for
+            // every feature at once, and the radius as the one all brackets agree on around it.
+            const double z_axis = plane.point.z() + (plane.normal.x() * plane.point.x() +
+                                                     plane.normal.y() * plane.point.y()) /
+                                                        plane.normal.z();
+            const Eigen::Vector2d c_axis = to2d(Eigen::Vector3d(0.0, 0.0, z_axis));
+            std::vector<Interval> radial;
+            for (const auto& [A, B] : inlier_brackets) {
+                const double ra = (A - c_axis).norm(), rb = (B - c_axis).norm();
+                radial.push_back({std::min(ra, rb), std::max(ra, rb)});
+            }
+            const IntervalEstimate e = stab(radial);
+            r.hot_mm = 2.0 * e.value;
+            // Plus the free fit's disagreement, which carries the pose's axis error.
+            r.u_mm = 2.0 *
+                     std::hypot(e.u, std::min(fit->fit.u_radius_mm, std::abs(e.value - bc.radius)));
+        }
         r.n_sectors = static_cast<int>(sector_d.size());
         if (sector_d.size() >= 2) r.sector_spread_mm = sample_std(sector_d);
     }

@@ -62,9 +62,27 @@ PartResult run(const core::Recording& rec, const core::Recipe& recipe, const Pip
         return r;
     }
     r.pose_source = o.pose_source;
-    const auto t0 = Clock::now();
-    r.measurement = measure::measure_part(recipe, rec, *o.T_world_part, {}, o.measure);
-    r.stage_ms.emplace_back("measure", ms_since(t0));
+    measure::FaceDisplacements u;
+    if (o.compensate) {
+        const auto t0 = Clock::now();
+        r.compensated = true;
+        for (const auto& face : rec.faces) {
+            auto fc = compensate::compensate_face(face, o.compensation);
+            r.compensation.push_back({fc.face, fc.applied, fc.degraded, fc.reasons, fc.n_degraded,
+                                      fc.peak_mm, fc.rms_mm, fc.rate_hz});
+            // Trouble that touches profiles degrades the part; trouble only in the margins
+            // (no profile's displacement depends on it) is a warning.
+            for (const auto& why : fc.reasons)
+                (fc.degraded ? r.degraded_reasons : r.warnings)
+                    .push_back(face.name + ": compensation: " + why);
+            r.degraded = r.degraded || fc.degraded;
+            if (fc.applied) u.emplace(face.name, std::move(fc.u_mm));
+        }
+        r.stage_ms.emplace_back("compensate", ms_since(t0));
+    }
+    const auto t1 = Clock::now();
+    r.measurement = measure::measure_part(recipe, rec, *o.T_world_part, u, o.measure);
+    r.stage_ms.emplace_back("measure", ms_since(t1));
     return r;
 }
 
@@ -79,6 +97,21 @@ std::string to_json(const PartResult& r) {
     j["growth"] = opt(m.growth);
     j["verdict"] = measure::to_string(m.verdict);
     j["pose_source"] = r.pose_source.empty() ? json() : json(r.pose_source);
+    j["degraded"] = r.degraded;
+    j["degraded_reasons"] = r.degraded_reasons;
+    json comp = json::object();
+    comp["enabled"] = r.compensated;
+    comp["faces"] = json::array();
+    for (const auto& c : r.compensation)
+        comp["faces"].push_back({{"face", c.face},
+                                 {"applied", c.applied},
+                                 {"degraded", c.degraded},
+                                 {"reasons", c.reasons},
+                                 {"degraded_profiles", c.n_degraded},
+                                 {"peak_displacement_mm", c.peak_mm},
+                                 {"rms_displacement_mm", c.rms_mm},
+                                 {"accel_rate_hz", c.rate_hz}});
+    j["compensation"] = comp;
     j["faces"] = json::array();
     for (const auto& f : r.faces)
         j["faces"].push_back({{"name", f.name},
@@ -144,6 +177,16 @@ std::string to_table(const PartResult& r) {
             f.margin_before_s.value_or(NAN), f.margin_after_s.value_or(NAN));
         s += line;
     }
+    if (r.compensated)
+        for (const auto& c : r.compensation) {
+            std::snprintf(line, sizeof line, "%-8s compensation %s: peak %.3f mm, rms %.3f mm%s\n",
+                          c.face.c_str(), c.applied ? "applied" : "NOT applied", c.peak_mm,
+                          c.rms_mm, c.degraded ? ", DEGRADED" : "");
+            s += line;
+        }
+    else
+        s += "vibration compensation: off\n";
+    for (const auto& why : r.degraded_reasons) s += "degraded: " + why + "\n";
     s += "\n";
     std::snprintf(line, sizeof line, "%-8s %-15s %9s %9s %9s %8s %15s %-12s %7s %7s %7s\n", "face",
                   "feature", "hot mm", "cold mm", "nominal", "dev mm", "tolerance", "verdict",

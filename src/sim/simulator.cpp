@@ -131,7 +131,10 @@ core::Result<SimResult> simulate(const core::Recipe& recipe, const CellConfig& c
         t += static_cast<double>(n_prof[j]) / s.line_rate_hz + cell.face_gap_s;
     }
     const double t_end = t + cell.accel.margin_s;
-    const Vibration vib(cell.vibration, 0.0, t_end, rng);
+    // Everything of this scan (vibration, sensor noise, accelerometer) from its own stream, so
+    // the same part can be scanned again under other vibration (scan_seed).
+    std::mt19937_64 scan_rng(opt.scan_seed ? *opt.scan_seed : rng());
+    const Vibration vib(cell.vibration, 0.0, t_end, scan_rng);
 
     const std::int64_t t0_ns = opt.t0_ns ? opt.t0_ns
                                          : std::chrono::duration_cast<std::chrono::nanoseconds>(
@@ -194,10 +197,10 @@ core::Result<SimResult> simulate(const core::Recipe& recipe, const CellConfig& c
                 if (cast(solid, T_part_world, false, 0.0, p + 1e-6 * to_imager / dist,
                          to_imager / dist, dist))
                     continue;
-                if (u01(rng) < s.dropout_fraction) continue;
-                double along = s.range_noise_mm * gauss(rng);
-                if (u01(rng) < s.spike_fraction) {
-                    along = s.spike_range_mm * (2.0 * u01(rng) - 1.0);
+                if (u01(scan_rng) < s.dropout_fraction) continue;
+                double along = s.range_noise_mm * gauss(scan_rng);
+                if (u01(scan_rng) < s.spike_fraction) {
+                    along = s.spike_range_mm * (2.0 * u01(scan_rng) - 1.0);
                     ft.spike[k * s.width + i] = 1;
                     ++ft.n_spikes;
                 }
@@ -213,16 +216,16 @@ core::Result<SimResult> simulate(const core::Recipe& recipe, const CellConfig& c
         const Eigen::Matrix3d R_world_accel = R * fc.R_camera_accel;
         const double noise_mps2 = a.noise_density_ug * 1e-6 * kG * std::sqrt(a.rate_hz / 2.0);
         const double clip = a.range_g * kG;
-        const Eigen::Vector3d bias(a.bias_mps2 * (2 * u01(rng) - 1),
-                                   a.bias_mps2 * (2 * u01(rng) - 1),
-                                   a.bias_mps2 * (2 * u01(rng) - 1));
+        const Eigen::Vector3d bias(a.bias_mps2 * (2 * u01(scan_rng) - 1),
+                                   a.bias_mps2 * (2 * u01(scan_rng) - 1),
+                                   a.bias_mps2 * (2 * u01(scan_rng) - 1));
         const double ta = t_start[j] - a.margin_s;
         const double tb = t_start[j] + static_cast<double>(n - 1) / s.line_rate_hz + a.margin_s;
         const auto n_acc = static_cast<std::int64_t>(std::floor((tb - ta) * a.rate_hz)) + 1;
         std::int64_t last_ns = std::numeric_limits<std::int64_t>::min();
         for (std::int64_t q = 0; q < n_acc; ++q) {
             double tq = ta + static_cast<double>(q) / a.rate_hz;
-            if (a.jitter_ns > 0) tq += a.jitter_ns * 1e-9 * (2 * u01(rng) - 1);
+            if (a.jitter_ns > 0) tq += a.jitter_ns * 1e-9 * (2 * u01(scan_rng) - 1);
             const std::int64_t tq_ns = t0_ns + std::llround(tq * kNsPerS);
             if (tq_ns <= last_ns) continue;
             last_ns = tq_ns;
@@ -230,7 +233,7 @@ core::Result<SimResult> simulate(const core::Recipe& recipe, const CellConfig& c
                 vib.acceleration_mmps2(tq) / 1000.0 + Eigen::Vector3d(0, 0, kG);
             Eigen::Vector3d acc = R_world_accel.transpose() * acc_world + bias;
             for (int c = 0; c < 3; ++c) {
-                acc[c] = std::clamp(acc[c] + noise_mps2 * gauss(rng), -clip, clip);
+                acc[c] = std::clamp(acc[c] + noise_mps2 * gauss(scan_rng), -clip, clip);
                 face.accel_mps2.push_back(static_cast<float>(acc[c]));
             }
             face.accel_times_ns.push_back(tq_ns);

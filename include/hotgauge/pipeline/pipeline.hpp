@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "hotgauge/compensate/compensate.hpp"
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/recording.hpp"
 #include "hotgauge/measure/features.hpp"
@@ -16,7 +17,18 @@ namespace hotgauge::pipeline {
 struct PipelineOptions {
     std::optional<Eigen::Isometry3d> T_world_part;  // known pose (truth file, --part-pose)
     std::string pose_source;                        // where it came from, for the report
+    bool compensate = true;                         // vibration compensation (--no-compensation)
+    compensate::CompensationConfig compensation;
     measure::MeasureConfig measure;
+};
+
+// What compensation did on one face (the per-profile u is not kept in the result).
+struct FaceCompensationSummary {
+    std::string face;
+    bool applied = false, degraded = false;
+    std::vector<std::string> reasons;
+    std::int64_t n_degraded = 0;
+    double peak_mm = 0, rms_mm = 0, rate_hz = 0;
 };
 
 // What was acquired on one face: enough for an engineer to judge the data before the numbers.
@@ -35,6 +47,10 @@ struct PartResult {
     std::string part_id, recipe, captured_at;
     std::string pose_source;  // "" when no pose: nothing measured
     std::vector<FaceSummary> faces;
+    bool compensated = false;  // compensation was requested and ran
+    std::vector<FaceCompensationSummary> compensation;
+    bool degraded = false;  // some data could not be trusted fully
+    std::vector<std::string> degraded_reasons;
     measure::PartMeasurement measurement;
     std::vector<std::string> warnings;                     // reader findings, degraded conditions
     std::vector<std::pair<std::string, double>> stage_ms;  // wall time per stage

@@ -75,7 +75,8 @@ core::Result<CellConfig> read_cell_config(const std::filesystem::path& file);
 CellConfig quick(CellConfig cell);
 
 struct SimOptions {
-    std::uint64_t seed = 1;
+    std::uint64_t seed = 1;                  // the part: dimensions and pose
+    std::optional<std::uint64_t> scan_seed;  // the scan: vibration, noise; default from seed
     double temperature_c = 20.0;
     std::optional<Eigen::Isometry3d> T_world_part;  // default: random yaw and offset
     double dimension_sigma_mm = 0.05;  // as-forged deviation of each level and diameter (cold)

@@ -26,7 +26,7 @@ struct VibrationConfig {
     double blow_period_s = 2.0;      // press rhythm
     double blow_jitter_s = 0.3;      // uniform ± around the rhythm
     double amplitude_scatter = 0.2;  // relative σ of a blow's strength
-    double onset_s = 0.005;          // time constant of the smooth onset of a blow
+    double onset_s = 0.06;           // blows ramp up over about half a period of the 8 Hz mode
     double ambient_rms_mm = 0.002;   // broadband hum, 2–120 Hz
 };
 

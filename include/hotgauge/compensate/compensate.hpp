@@ -1,0 +1,47 @@
+#pragma once
+// Vibration compensation (seed paper §4.1, Eq. 5–7): the accelerometer in the sensor head,
+// integrated twice in the frequency domain, gives the head's displacement u(t); every profile is
+// moved back by it (P = P_nominal + u(t_k), recording-format-v1). docs/compensation.md.
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "hotgauge/core/recording.hpp"
+
+namespace hotgauge::compensate {
+
+struct CompensationConfig {
+    double highpass_hz = 1.5;     // below this nothing is trusted (noise grows as 1/f²)
+    int highpass_order = 4;       // Butterworth magnitude order of the zero-phase high-pass
+    double taper_s = 0.25;        // Tukey taper at each end of the record (inside the margins)
+    double min_margin_s = 0.5;    // profiles closer than this to a record end are degraded
+    double clock_offset_s = 0.0;  // accelerometer clock − camera clock
+    double gap_factor = 3.0;      // a sample interval above gap_factor × nominal is a gap
+    double clip_mps2 = 8.0 * 9.80665 * 0.999;  // |a| at or above this on any axis: clipped
+    double degrade_pad_s = 0.05;  // profiles this close to a gap or clipped sample: degraded
+};
+
+// Displacement from uniformly sampled acceleration (one axis, SI units in, same units·s² out):
+// mean removed, Tukey taper, zero padding to ≥ 2N, X(k)/(jω_k)² with a smooth
+// zero-phase high-pass and the DC bin zeroed, inverse DFT (OpenCV). Returns N samples.
+std::vector<double> integrate_twice(const std::vector<double>& accel, double rate_hz,
+                                    const CompensationConfig& config);
+
+struct FaceCompensation {
+    std::string face;
+    bool applied = false;                        // u is valid for (most) profiles
+    bool degraded = false;                       // some profiles could not be compensated reliably
+    std::vector<std::string> reasons;            // why degraded / not applied
+    std::vector<Eigen::Vector3d> u_mm;           // per profile, world frame (0 where not applied)
+    std::vector<std::uint8_t> profile_degraded;  // per profile
+    std::int64_t n_degraded = 0;
+    double peak_mm = 0.0, rms_mm = 0.0;  // of |u| over the profiles
+    double rate_hz = 0.0;                // resampling rate used
+};
+
+// Per-profile world displacement of one face's sensor. Never throws: bad or missing samples make
+// the result degraded (with reasons), not an error.
+FaceCompensation compensate_face(const core::FaceScan& face, const CompensationConfig& config);
+
+}  // namespace hotgauge::compensate
