@@ -105,7 +105,7 @@ FeatureSpec read_feature(const YamlReader& y, const YAML::Node& n, const std::st
 
 core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
     const YamlReader y(file.string());
-    try {
+    return y.guarded<Recipe>([&] {
         const YAML::Node root = y.load();
         y.expect_map(root, "recipe", {"part", "description", "geometry", "material", "features"});
         Recipe r;
@@ -161,12 +161,7 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
             r.features.push_back(std::move(f));
         }
         return r;
-    } catch (const YamlError& e) {
-        return core::make_error(e.what());
-    } catch (const YAML::Exception& e) {
-        return core::make_error(file.string() + ":" + std::to_string(e.mark.line + 1) + ": " +
-                                e.msg);
-    }
+    });
 }
 
 }  // namespace hotgauge::io

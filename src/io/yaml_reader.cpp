@@ -3,6 +3,8 @@
 #include <cmath>
 #include <filesystem>
 
+#include "hotgauge/core/geometry.hpp"
+
 namespace hotgauge::io {
 
 YAML::Node YamlReader::load() const {
@@ -93,6 +95,33 @@ std::vector<double> YamlReader::numbers(const YAML::Node& node, const std::strin
     std::vector<double> out;
     for (const auto& n : node) out.push_back(number(n, what));
     return out;
+}
+
+Eigen::Isometry3d YamlReader::isometry(const YAML::Node& n, const std::string& what) const {
+    if (!n.IsSequence() || n.size() != 4) fail(n, what + ": expected a 4x4 matrix (4 rows)");
+    Eigen::Matrix4d M;
+    for (int r = 0; r < 4; ++r) {
+        const auto row = numbers(n[r], what, 4);
+        for (int c = 0; c < 4; ++c) M(r, c) = row[c];
+    }
+    if ((M.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 1e-12)
+        fail(n, what + ": last row must be [0, 0, 0, 1]");
+    if (!core::is_rotation(M.topLeftCorner<3, 3>()))
+        fail(n, what + ": not a proper rotation (orthonormal, det +1)");
+    Eigen::Isometry3d T;
+    T.matrix() = M;
+    return T;
+}
+
+Eigen::Matrix3d YamlReader::rotation(const YAML::Node& n, const std::string& what) const {
+    if (!n.IsSequence() || n.size() != 3) fail(n, what + ": expected a 3x3 matrix (3 rows)");
+    Eigen::Matrix3d R;
+    for (int r = 0; r < 3; ++r) {
+        const auto row = numbers(n[r], what, 3);
+        for (int c = 0; c < 3; ++c) R(r, c) = row[c];
+    }
+    if (!core::is_rotation(R)) fail(n, what + ": not a proper rotation (orthonormal, det +1)");
+    return R;
 }
 
 double YamlReader::number_or(const YAML::Node& map, const std::string& what, const char* key,

@@ -1,6 +1,5 @@
 #include <cmath>
 
-#include "hotgauge/core/geometry.hpp"
 #include "hotgauge/io/yaml_reader.hpp"
 #include "hotgauge/sim/simulator.hpp"
 
@@ -8,33 +7,6 @@ namespace hotgauge::sim {
 namespace {
 
 using io::YamlReader;
-
-Eigen::Matrix3d rotation(const YamlReader& y, const YAML::Node& n, const std::string& what) {
-    if (!n.IsSequence() || n.size() != 3) y.fail(n, what + ": expected a 3x3 matrix (3 rows)");
-    Eigen::Matrix3d R;
-    for (int r = 0; r < 3; ++r) {
-        const auto row = y.numbers(n[r], what, 3);
-        for (int c = 0; c < 3; ++c) R(r, c) = row[c];
-    }
-    if (!core::is_rotation(R)) y.fail(n, what + ": not a proper rotation (orthonormal, det +1)");
-    return R;
-}
-
-Eigen::Isometry3d pose(const YamlReader& y, const YAML::Node& n, const std::string& what) {
-    if (!n.IsSequence() || n.size() != 4) y.fail(n, what + ": expected a 4x4 matrix (4 rows)");
-    Eigen::Matrix4d M;
-    for (int r = 0; r < 4; ++r) {
-        const auto row = y.numbers(n[r], what, 4);
-        for (int c = 0; c < 4; ++c) M(r, c) = row[c];
-    }
-    if ((M.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 0)
-        y.fail(n, what + ": last row must be [0, 0, 0, 1]");
-    if (!core::is_rotation(M.topLeftCorner<3, 3>()))
-        y.fail(n, what + ": rotation part is not a proper rotation");
-    Eigen::Isometry3d T;
-    T.matrix() = M;
-    return T;
-}
 
 Eigen::Vector3d unit(const YamlReader& y, const YAML::Node& n, const std::string& what) {
     const auto v = y.numbers(n, what, 3);
@@ -61,7 +33,7 @@ double fraction(const YamlReader& y, const YAML::Node& map, const std::string& w
 
 core::Result<CellConfig> read_cell_config(const std::filesystem::path& file) {
     const YamlReader y(file.string());
-    try {
+    return y.guarded<CellConfig>([&] {
         const YAML::Node root = y.load();
         y.expect_map(root, "cell",
                      {"sensor", "faces", "vibration", "accelerometer", "placement",
@@ -113,10 +85,11 @@ core::Result<CellConfig> read_cell_config(const std::filesystem::path& file) {
             fc.name = y.string(y.require(f, w, "name"), w + ".name");
             for (const auto& other : c.faces)
                 if (other.name == fc.name) y.fail(f, w + ".name: duplicate face '" + fc.name + "'");
-            fc.T_world_camera = pose(y, y.require(f, w, "camera_to_world"), w + ".camera_to_world");
+            fc.T_world_camera =
+                y.isometry(y.require(f, w, "camera_to_world"), w + ".camera_to_world");
             fc.scan_direction = unit(y, y.require(f, w, "scan_direction"), w + ".scan_direction");
             if (f["accel_to_camera"])
-                fc.R_camera_accel = rotation(y, f["accel_to_camera"], w + ".accel_to_camera");
+                fc.R_camera_accel = y.rotation(f["accel_to_camera"], w + ".accel_to_camera");
             fc.scan_length_mm = positive(y, f, w, "scan_length_mm", fc.scan_length_mm);
             fc.profile_spacing_mm = positive(y, f, w, "profile_spacing_mm", fc.profile_spacing_mm);
             if (f["support_visible"])
@@ -179,12 +152,7 @@ core::Result<CellConfig> read_cell_config(const std::filesystem::path& file) {
                 y.number_or(p, "placement", "max_tilt_deg", c.placement.max_tilt_deg);
         }
         return c;
-    } catch (const io::YamlError& e) {
-        return core::make_error(e.what());
-    } catch (const YAML::Exception& e) {
-        return core::make_error(file.string() + ":" + std::to_string(e.mark.line + 1) + ": " +
-                                e.msg);
-    }
+    });
 }
 
 }  // namespace hotgauge::sim

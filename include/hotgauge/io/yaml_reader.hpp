@@ -4,11 +4,14 @@
 // modules take plain structs.
 #include <yaml-cpp/yaml.h>
 
+#include <Eigen/Geometry>
 #include <array>
 #include <initializer_list>
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "hotgauge/core/result.hpp"
 
 namespace hotgauge::io {
 
@@ -40,6 +43,23 @@ class YamlReader {
     std::vector<std::string> strings(const YAML::Node& node, const std::string& what) const;
     std::vector<double> numbers(const YAML::Node& node, const std::string& what,
                                 std::size_t expected_size = 0) const;
+
+    // A 4×4 rigid transform, row-major: proper rotation, last row [0, 0, 0, 1].
+    Eigen::Isometry3d isometry(const YAML::Node& node, const std::string& what) const;
+    // A 3×3 proper rotation (orthonormal, det +1 within 1e-6).
+    Eigen::Matrix3d rotation(const YAML::Node& node, const std::string& what) const;
+
+    // Runs a reader body; YamlError and yaml-cpp exceptions become an Error naming file:line.
+    template <class T, class Body>
+    core::Result<T> guarded(Body&& body) const {
+        try {
+            return body();
+        } catch (const YamlError& e) {
+            return core::make_error(e.what());
+        } catch (const YAML::Exception& e) {
+            return core::make_error(file_ + ":" + std::to_string(e.mark.line + 1) + ": " + e.msg);
+        }
+    }
 
     // Shorthands for optional keys with defaults.
     double number_or(const YAML::Node& map, const std::string& what, const char* key,
