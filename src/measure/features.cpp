@@ -383,12 +383,6 @@ bool flat_around(const FaceFrame& fr, const PlaneFit& plane, double thr, std::in
 
 double angle_of(const Eigen::Vector2d& v) { return std::atan2(v.y(), v.x()); }
 
-// Angular coverage (degrees, 10° bins) and per-sector mean distances of points around `c`.
-struct ArcStats {
-    double coverage_deg = 0;
-    std::vector<double> sector_values;
-};
-
 double sample_std(const std::vector<double>& v) {
     if (v.size() < 2) return kNaN;
     double m = 0;
