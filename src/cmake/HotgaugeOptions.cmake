@@ -7,8 +7,9 @@ function(hotgauge_target_options target)
   target_compile_options(${target} PRIVATE -Wall -Wextra -Wpedantic -Wshadow
                                            -Wnon-virtual-dtor -Wconversion -Wno-sign-conversion)
   if(HOTGAUGE_SANITIZE)
-    target_compile_options(${target} PUBLIC -fsanitize=address,undefined -fno-omit-frame-pointer
-                                            -fno-sanitize-recover=undefined)
+    # -O1: sanitized tests run several times faster than at -O0, and build faster than at -O2.
+    target_compile_options(${target} PUBLIC -O1 -fsanitize=address,undefined
+                                            -fno-omit-frame-pointer -fno-sanitize-recover=undefined)
     target_link_options(${target} PUBLIC -fsanitize=address,undefined)
   endif()
 endfunction()

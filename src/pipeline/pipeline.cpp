@@ -157,12 +157,14 @@ std::string to_json(const PartResult& r) {
 std::string to_table(const PartResult& r) {
     const auto& m = r.measurement;
     std::string s;
-    char line[256];
-    std::snprintf(line, sizeof line, "part %s  recipe %s  temperature %s  pose %s  verdict %s\n",
-                  r.part_id.c_str(), r.recipe.c_str(),
-                  m.temperature_c ? (std::to_string(*m.temperature_c) + " °C").c_str() : "unknown",
+    char line[512];
+    char temperature[32] = "unknown";
+    if (m.temperature_c)
+        std::snprintf(temperature, sizeof temperature, "%.1f °C", *m.temperature_c);
+    std::snprintf(line, sizeof line, "part %s  recipe %s  temperature %s  pose %s  verdict %s%s\n",
+                  r.part_id.c_str(), r.recipe.c_str(), temperature,
                   r.pose_source.empty() ? "none" : r.pose_source.c_str(),
-                  measure::to_string(m.verdict));
+                  measure::to_string(m.verdict), r.degraded ? " (DEGRADED)" : "");
     s += line;
     std::snprintf(line, sizeof line, "%-8s %8s %6s %10s %6s %8s %8s %8s %9s %9s\n", "face",
                   "profiles", "width", "points", "NaN %", "scan s", "accel", "accel Hz", "before s",
