@@ -242,6 +242,19 @@ TEST(CompensateBadInput, TroubleOutsideTheScanIsOnlyAWarning) {
     EXPECT_TRUE(warned);
 }
 
+TEST(CompensateBadInput, FarOffTimestampIsIgnored) {
+    // One sample 11.6 days later: still strictly increasing, so a valid recording. It must not
+    // stretch the integration grid over days.
+    auto s = simulate(env().cell, 13);
+    auto& f = s.recording.faces[0];
+    f.accel_times_ns.back() += 1'000'000'000'000'000;
+    const auto r = run_pipeline(s);
+    bool noted = false;
+    for (const auto& w : r.warnings) noted = noted || w.find("ignored") != std::string::npos;
+    EXPECT_TRUE(noted);
+    EXPECT_TRUE(r.compensation[0].applied);
+}
+
 TEST(CompensateBadInput, NoAccelerometerAtAll) {
     auto s = simulate(env().cell, 11);
     for (auto& f : s.recording.faces) {

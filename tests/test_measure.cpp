@@ -4,6 +4,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
+#include <random>
 
 #include "hotgauge/core/geometry.hpp"
 #include "hotgauge/io/recipe.hpp"
@@ -126,6 +128,51 @@ TEST(MeasureRobustness, DiameterOnA120DegreeArc) {
     EXPECT_FALSE(d7.reason.empty());
 }
 
+TEST(MeasureRobustness, PartialArcWithAnOffsetPoseIsNotMeasured) {
+    // The same 120° arc, but the pose's axis is 0.3 mm off (inside the 1 mm off-axis guard):
+    // centred on that axis the radius would be wrong by ~0.5 mm; a free fit disagrees, so the
+    // value is refused rather than reported with a small uncertainty.
+    sim::CellConfig cell = env().cell;
+    const double g = env().recipe.material.growth(900.0);
+    for (auto& f : cell.faces)
+        if (f.name == "top") f.scan_length_mm = 120.0 - 0.25 * 69.5 * g;
+    sim::SimOptions o;
+    o.seed = 7;
+    o.temperature_c = 900.0;
+    o.faces = {"top"};
+    o.T_world_part = Eigen::Isometry3d::Identity();
+    auto s = sim::simulate(env().recipe, cell, o);
+    ASSERT_TRUE(s);
+    Eigen::Isometry3d off = s->truth.T_world_part;
+    off.translation().y() += 0.3;
+    const auto m = measure::measure_part(env().recipe, s->recording, off);
+    const auto& d3 = feature(m, "Diameter 3");
+    EXPECT_FALSE(d3.hot_mm) << *d3.hot_mm;
+    EXPECT_NE(d3.reason.find("free fit"), std::string::npos) << d3.reason;
+}
+
+TEST(MeasureRobustness, NonFiniteAndOffRaySamplesDoNotDerail) {
+    // Corrupt samples a reader lets through (finite dtype, any value): ±inf, and points far off
+    // their column's ray. The part is still measured, within the usual bounds.
+    auto s = simulate(env().cell, 13, 950.0, {"top"});
+    auto& f = s.recording.faces[0];
+    std::mt19937_64 rng(3);
+    std::uniform_int_distribution<std::size_t> pick(0, f.profiles_mm.size() / 2 - 1);
+    for (int j = 0; j < 2000; ++j) {
+        const std::size_t q = pick(rng);
+        if (j % 2)
+            f.profiles_mm[2 * q] = std::numeric_limits<float>::infinity();
+        else
+            f.profiles_mm[2 * q + 1] = 3e4f;  // x unchanged: off the ray
+    }
+    const auto m = measure::measure_part(env().recipe, s.recording, s.truth.T_world_part);
+    for (const char* name : {"Diameter 3", "Diameter 5", "Diameter 7"}) {
+        const auto& d = feature(m, name);
+        ASSERT_TRUE(d.hot_mm) << name << ": " << d.reason;
+        EXPECT_NEAR(*d.hot_mm, s.truth.features[&d - m.features.data()].hot_mm, 0.02) << name;
+    }
+}
+
 TEST(MeasureRobustness, MissingFaceIsNotMeasuredWithAReason) {
     const auto s = simulate(env().cell, 5, 1000.0, {"top", "side1", "side2"});
     const auto m = measure::measure_part(env().recipe, s.recording, s.truth.T_world_part);
@@ -173,6 +220,19 @@ TEST(MeasureThermal, NoTemperatureMeansNoColdValue) {
     EXPECT_EQ(d3.verdict, measure::Verdict::kNotMeasured);
     EXPECT_NE(d3.reason.find("temperature"), std::string::npos) << d3.reason;
     EXPECT_FALSE(m.growth);
+}
+
+TEST(MeasureThermal, ImplausibleTemperatureIsNotUsed) {
+    auto s = simulate(env().cell, 8, 1000.0, {"top"});
+    for (double t : {1e9, -1e5, 2500.0}) {
+        s.recording.temperature_c = t;
+        const auto m = measure::measure_part(env().recipe, s.recording, s.truth.T_world_part);
+        const auto& d3 = feature(m, "Diameter 3");
+        ASSERT_TRUE(d3.hot_mm) << t << ": " << d3.reason;  // the hot value does not need T
+        EXPECT_FALSE(d3.cold_mm) << t;
+        EXPECT_NE(d3.reason.find("outside the plausible range"), std::string::npos) << d3.reason;
+        EXPECT_FALSE(m.growth);
+    }
 }
 
 TEST(MeasureThermal, ColdIsHotOverGrowth) {

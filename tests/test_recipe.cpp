@@ -90,6 +90,16 @@ TEST(Recipe, MeshFileMustExistAndBePlyOrStl) {
               std::string::npos);
 }
 
+TEST(Recipe, MoreMistakes) {
+    EXPECT_NE(error_after("{name: spigot, from", "{name: spigot nose, from")
+                  .find("duplicate section name"),
+              std::string::npos);
+    EXPECT_NE(error_after("slot: 2,", "slot: 4294967297,").find("must be in 1..1000"),
+              std::string::npos);
+    EXPECT_NE(error_after("alpha0_per_k: 1.2e-5", "alpha0_per_k: 1.2e-3").find("growth"),
+              std::string::npos);
+}
+
 TEST(Recipe, MissingFile) {
     auto r = read_recipe("/nonexistent/recipe.yaml");
     ASSERT_FALSE(r);

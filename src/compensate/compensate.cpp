@@ -83,7 +83,18 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
     std::int64_t n_nan = 0, n_clip = 0;
     const std::int64_t t_ref = face.profile_times_ns.front();
     std::vector<double> clipped_at;
+    // Only samples near the scan count: a record may be longer (or carry a stray far-off
+    // timestamp); the integration window is the scan plus kWindowMarginS on each side.
+    constexpr double kWindowMarginS = 10.0;
+    const double scan_end_s = static_cast<double>(face.profile_times_ns.back() - t_ref) / kNsPerS;
+    std::int64_t n_outside = 0;
     for (std::int64_t j = 0; j < face.n_accel(); ++j) {
+        const double t_raw =
+            static_cast<double>(face.accel_times_ns[j] - t_ref) / kNsPerS - c.clock_offset_s;
+        if (t_raw < -kWindowMarginS || t_raw > scan_end_s + kWindowMarginS) {
+            ++n_outside;
+            continue;
+        }
         const Eigen::Vector3d v = face.accel(j);
         const double t =
             static_cast<double>(face.accel_times_ns[j] - t_ref) / kNsPerS - c.clock_offset_s;
@@ -98,6 +109,9 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
         t_s.push_back(t);
         a.push_back(v);
     }
+    if (n_outside)
+        out.reasons.push_back(std::to_string(n_outside) +
+                              " accelerometer sample(s) more than 10 s from the scan ignored");
     if (t_s.size() < 16) {
         degrade_all(face.n_accel() == 0 ? "no accelerometer samples"
                                         : "too few usable accelerometer samples (" +

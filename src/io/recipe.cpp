@@ -1,5 +1,6 @@
 #include "hotgauge/io/recipe.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <set>
 
@@ -35,7 +36,9 @@ std::vector<Section> read_sections(const YamlReader& y, const YAML::Node& list,
         if (*r.level(s.from_level) >= *r.level(s.to_level))
             y.fail(n, w + ": level '" + s.from_level + "' must lie below '" + s.to_level + "'");
         if (s.diameter_mm <= 0.0) y.fail(n, w + ".diameter_mm: must be positive");
-        if (r.section(s.name)) y.fail(n, w + ": duplicate section name '" + s.name + "'");
+        const bool listed =
+            std::any_of(out.begin(), out.end(), [&](const Section& o) { return o.name == s.name; });
+        if (listed || r.section(s.name)) y.fail(n, w + ": duplicate section name '" + s.name + "'");
         out.push_back(s);
     }
     return out;
@@ -48,8 +51,9 @@ FeatureSpec read_feature(const YamlReader& y, const YAML::Node& n, const std::st
                   "nominal_mm", "tolerance_mm"});
     FeatureSpec f;
     f.name = y.string(y.require(n, w, "name"), w + ".name");
-    f.slot = static_cast<int>(y.integer(y.require(n, w, "slot"), w + ".slot"));
-    if (f.slot < 1) y.fail(n["slot"], w + ".slot: must be >= 1");
+    const std::int64_t slot = y.integer(y.require(n, w, "slot"), w + ".slot");
+    if (slot < 1 || slot > 1000) y.fail(n["slot"], w + ".slot: must be in 1..1000");
+    f.slot = static_cast<int>(slot);
     f.faces = y.strings(y.require(n, w, "faces"), w + ".faces");
     f.nominal_mm = y.number(y.require(n, w, "nominal_mm"), w + ".nominal_mm");
     const auto tol = y.numbers(y.require(n, w, "tolerance_mm"), w + ".tolerance_mm", 2);
@@ -143,6 +147,13 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
             r.material.alpha0_per_k =
                 y.number(y.require(m, "material", "alpha0_per_k"), "material.alpha0_per_k");
             r.material.alpha1_per_k2 = y.number_or(m, "material", "alpha1_per_k2", 0.0);
+            // Metals expand by well under 5 % up to 1600 °C; anything else is a typo.
+            for (double t : {-50.0, 1600.0}) {
+                const double growth = r.material.growth(t);
+                if (!(growth > 0.95 && growth < 1.05))
+                    y.fail(m, "material: alpha gives growth " + std::to_string(growth) + " at " +
+                                  std::to_string(static_cast<int>(t)) + " °C, outside 0.95..1.05");
+            }
         } else {
             y.fail(root, "recipe: missing key 'material' (the thermal model is required)");
         }

@@ -22,6 +22,9 @@ using core::AxisymmetricSolid;
 using core::FeatureSpec;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+// A pyrometer reading outside this is a fault, not a temperature (forging: 700–1300 °C).
+constexpr double kMinTemperatureC = -50.0;
+constexpr double kMaxTemperatureC = 1600.0;
 
 // One face in the part frame. Any sample (profile k, column i) is transformed on demand; the
 // samples near the part (inside its bounding cylinder, with a margin) are kept transformed and
@@ -37,7 +40,7 @@ struct FaceFrame {
     Eigen::Vector3d view;  // camera +z (away from the sensor), part frame
 
     struct Near {
-        std::int32_t q;     // k·w + i
+        std::int64_t q;     // k·w + i
         Eigen::Vector3f p;  // part frame
         float r;            // distance from the part axis
     };
@@ -60,8 +63,8 @@ struct FaceFrame {
     }
 
     bool valid(std::int64_t k, std::int64_t i) const {
-        return k >= 0 && k < n && i >= 0 && i < w && !std::isnan(scan->x(k, i)) &&
-               !std::isnan(scan->z(k, i));
+        return k >= 0 && k < n && i >= 0 && i < w && std::isfinite(scan->x(k, i)) &&
+               std::isfinite(scan->z(k, i));
     }
     Eigen::Vector3d point(std::int64_t k, std::int64_t i) const {
         return M * Eigen::Vector3d(scan->x(k, i), 0.0, scan->z(k, i)) + origin[k];
@@ -144,6 +147,49 @@ void fit_columns(const std::vector<ColumnSums>& sums, std::vector<double>& a,
     }
 }
 
+// A corrupt sample off its column's ray (which a calibrated sensor cannot produce) would tilt
+// that column's line: columns with a sample farther than kRayToleranceMm from their line are
+// fitted again from the samples near a robust (median) line.
+void refit_off_ray_columns(const core::FaceScan& f, std::vector<ColumnSums>& sums,
+                           std::vector<double>& a, std::vector<double>& b) {
+    constexpr double kRayToleranceMm = 0.5;
+    const std::int64_t n = f.n_profiles(), w = f.width;
+    std::vector<std::uint8_t> bad(static_cast<std::size_t>(w), 0);
+    bool any = false;
+    for (std::int64_t k = 0; k < n; ++k)
+        for (std::int64_t i = 0; i < w; ++i) {
+            const double x = f.x(k, i), z = f.z(k, i);
+            if (!std::isfinite(x) || !std::isfinite(z) || std::isnan(b[i])) continue;
+            if (std::abs(x - a[i] - b[i] * z) > kRayToleranceMm) {
+                bad[i] = 1;
+                any = true;
+            }
+        }
+    if (!any) return;
+    for (std::int64_t i = 0; i < w; ++i) {
+        if (!bad[i]) continue;
+        std::vector<double> xs, zs, ratio, icpt;
+        for (std::int64_t k = 0; k < n; ++k) {
+            const double x = f.x(k, i), z = f.z(k, i);
+            if (std::isfinite(x) && std::isfinite(z) && z != 0.0) {
+                xs.push_back(x);
+                zs.push_back(z);
+                ratio.push_back(x / z);
+            }
+        }
+        sums[i] = ColumnSums{};
+        if (xs.empty()) continue;
+        std::nth_element(ratio.begin(), ratio.begin() + ratio.size() / 2, ratio.end());
+        const double b0 = ratio[ratio.size() / 2];
+        for (std::size_t j = 0; j < xs.size(); ++j) icpt.push_back(xs[j] - b0 * zs[j]);
+        std::nth_element(icpt.begin(), icpt.begin() + icpt.size() / 2, icpt.end());
+        const double a0 = icpt[icpt.size() / 2];
+        for (std::size_t j = 0; j < xs.size(); ++j)
+            if (std::abs(xs[j] - a0 - b0 * zs[j]) <= kRayToleranceMm) sums[i].add(xs[j], zs[j]);
+    }
+    fit_columns(sums, a, b);
+}
+
 // Counting sort of the near-part samples by z bucket.
 void bucket_by_z(FaceFrame& fr, std::vector<FaceFrame::Near> near, double z_lo, double z_hi) {
     const auto nb = static_cast<std::int64_t>((z_hi - z_lo) / FaceFrame::kBucketMm) + 1;
@@ -181,16 +227,16 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
         fr.origin[k] = T_part_world * t;
         for (std::int64_t i = 0; i < fr.w; ++i) {
             const float x = f.x(k, i), z = f.z(k, i);
-            if (std::isnan(x) || std::isnan(z)) continue;
+            if (!std::isfinite(x) || !std::isfinite(z)) continue;
             columns[i].add(x, z);
             const Eigen::Vector3d p = fr.M * Eigen::Vector3d(x, 0.0, z) + fr.origin[k];
             const double r2 = p.x() * p.x() + p.y() * p.y();
-            if (r2 > r2_max || p.z() < z_lo || p.z() > z_hi) continue;
-            near.push_back({static_cast<std::int32_t>(k * fr.w + i), p.cast<float>(),
-                            static_cast<float>(std::sqrt(r2))});
+            if (!(r2 <= r2_max && p.z() >= z_lo && p.z() <= z_hi)) continue;  // NaN-safe
+            near.push_back({k * fr.w + i, p.cast<float>(), static_cast<float>(std::sqrt(r2))});
         }
     }
     fit_columns(columns, fr.col_a, fr.col_b);
+    refit_off_ray_columns(f, columns, fr.col_a, fr.col_b);
     bucket_by_z(fr, std::move(near), z_lo, z_hi);
     return fr;
 }
@@ -799,10 +845,21 @@ class FeatureMeasurer {
                 radial.push_back({std::min(ra, rb), std::max(ra, rb)});
             }
             const IntervalEstimate e = stab(radial);
+            // The free fit's disagreement carries the pose's axis error: it enters u in full, and
+            // beyond what the free fit's own noise explains the value is not trusted at all.
+            const double disagreement = std::abs(e.value - bc.radius);
+            const double limit =
+                std::max(c_.max_partial_arc_disagreement_mm, 3.0 * fit->fit.u_radius_mm);
+            if (disagreement > limit) {
+                r.reason = "edge of '" + f.section + "' on " +
+                           std::to_string(static_cast<int>(r.arc_deg)) +
+                           "° of arc: centred on the part axis its radius differs by " +
+                           std::to_string(disagreement) +
+                           " mm from a free fit: pose off or edge distorted";
+                return;
+            }
             r.hot_mm = 2.0 * e.value;
-            // Plus the free fit's disagreement, which carries the pose's axis error.
-            r.u_mm = 2.0 *
-                     std::hypot(e.u, std::min(fit->fit.u_radius_mm, std::abs(e.value - bc.radius)));
+            r.u_mm = 2.0 * std::hypot(e.u, disagreement);
         }
         r.n_sectors = static_cast<int>(sector_d.size());
         if (sector_d.size() >= 2) r.sector_spread_mm = sample_std(sector_d);
@@ -1016,7 +1073,9 @@ PartMeasurement unmeasured(const core::Recipe& recipe, const core::Recording& re
                            const std::string& reason) {
     PartMeasurement out;
     out.temperature_c = rec.temperature_c;
-    if (rec.temperature_c) out.growth = recipe.material.growth(*rec.temperature_c);
+    if (rec.temperature_c && *rec.temperature_c >= kMinTemperatureC &&
+        *rec.temperature_c <= kMaxTemperatureC)
+        out.growth = recipe.material.growth(*rec.temperature_c);
     for (const auto& f : recipe.features) {
         out.features.push_back(skeleton(f));
         out.features.back().reason = reason;
@@ -1031,7 +1090,9 @@ PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& 
     PartMeasurement out;
     out.temperature_c = rec.temperature_c;
     Expect ex;
-    if (rec.temperature_c) {
+    const bool plausible_t = rec.temperature_c && *rec.temperature_c >= kMinTemperatureC &&
+                             *rec.temperature_c <= kMaxTemperatureC;
+    if (plausible_t) {
         out.growth = recipe.material.growth(*rec.temperature_c);
         ex.g = *out.growth;
         ex.slack = 0.002;  // α model error
@@ -1073,7 +1134,12 @@ PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& 
                 if (!ok) r.reason = "deviation outside tolerance";
             } else {
                 r.verdict = Verdict::kNotMeasured;
-                r.reason = "no part temperature in the recording: cold equivalent not available";
+                r.reason = rec.temperature_c
+                               ? "part temperature " + std::to_string(*rec.temperature_c) +
+                                     " °C outside the plausible range: cold equivalent not "
+                                     "available"
+                               : "no part temperature in the recording: cold equivalent not "
+                                 "available";
             }
         } else {
             r.verdict = Verdict::kNotMeasured;

@@ -26,9 +26,10 @@ struct MeasureConfig {
     double max_pair_gap_mm = 2.0;     // neighbour samples farther apart do not bracket an edge
     int min_plane_points = 50;
     int min_edge_points = 20;
-    double free_centre_min_arc_deg = 300.0;  // below: the circle is centred on the part axis
-    double min_arc_deg = 30.0;               // a circle seen on less arc than this is not measured
-    int sectors = 8;                         // multiple sampling (paper §4.3): sector fits
+    double free_centre_min_arc_deg = 300.0;         // below: the circle is centred on the part axis
+    double max_partial_arc_disagreement_mm = 0.05;  // ... unless a free fit disagrees more
+    double min_arc_deg = 30.0;        // a circle seen on less arc than this is not measured
+    int sectors = 8;                  // multiple sampling (paper §4.3): sector fits
     double max_axis_offset_mm = 1.0;  // an edge circle centred this far off the part axis, or
     double max_plane_tilt_deg = 3.0;  // a plane this tilted from it: wrong pose or wrong part
 };
