@@ -255,6 +255,17 @@ TEST(CompensateBadInput, FarOffTimestampIsIgnored) {
     EXPECT_TRUE(r.compensation[0].applied);
 }
 
+TEST(CompensateBadInput, ClocksCenturiesApart) {
+    // Camera clock ~228 years before the accelerometer's: the difference does not fit in int64
+    // nanoseconds (UBSan in the sanitizer build checks that nothing overflows).
+    auto s = simulate(env().cell, 14);
+    for (auto& t : s.recording.faces[0].profile_times_ns) t -= 9'000'000'000'000'000'000;
+    const auto r = run_pipeline(s);
+    EXPECT_TRUE(r.degraded);
+    EXPECT_FALSE(r.compensation[0].applied);
+    EXPECT_NE(pipeline::to_json(r).find("\"faces\""), std::string::npos);
+}
+
 TEST(CompensateBadInput, NoAccelerometerAtAll) {
     auto s = simulate(env().cell, 11);
     for (auto& f : s.recording.faces) {

@@ -10,6 +10,15 @@ namespace {
 
 constexpr double kNsPerS = 1e9;
 
+// (a − b) in seconds, exact in int64 where it fits; clocks centuries apart (a corrupt file)
+// fall back to double arithmetic instead of overflowing.
+double seconds_between(std::int64_t a, std::int64_t b) {
+    std::int64_t d = 0;
+    if (__builtin_sub_overflow(a, b, &d))
+        return (static_cast<double>(a) - static_cast<double>(b)) / kNsPerS;
+    return static_cast<double>(d) / kNsPerS;
+}
+
 std::string fmt_s(double s) {
     char b[32];
     std::snprintf(b, sizeof b, "%.3f s", s);
@@ -86,18 +95,16 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
     // Only samples near the scan count: a record may be longer (or carry a stray far-off
     // timestamp); the integration window is the scan plus kWindowMarginS on each side.
     constexpr double kWindowMarginS = 10.0;
-    const double scan_end_s = static_cast<double>(face.profile_times_ns.back() - t_ref) / kNsPerS;
+    const double scan_end_s = seconds_between(face.profile_times_ns.back(), t_ref);
     std::int64_t n_outside = 0;
     for (std::int64_t j = 0; j < face.n_accel(); ++j) {
-        const double t_raw =
-            static_cast<double>(face.accel_times_ns[j] - t_ref) / kNsPerS - c.clock_offset_s;
+        const double t_raw = seconds_between(face.accel_times_ns[j], t_ref) - c.clock_offset_s;
         if (t_raw < -kWindowMarginS || t_raw > scan_end_s + kWindowMarginS) {
             ++n_outside;
             continue;
         }
         const Eigen::Vector3d v = face.accel(j);
-        const double t =
-            static_cast<double>(face.accel_times_ns[j] - t_ref) / kNsPerS - c.clock_offset_s;
+        const double t = seconds_between(face.accel_times_ns[j], t_ref) - c.clock_offset_s;
         if (!v.allFinite()) {
             ++n_nan;
             continue;
@@ -168,7 +175,7 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
     double sum2 = 0.0;
     std::int64_t n_applied = 0;
     for (std::int64_t k = 0; k < np; ++k) {
-        const double t = static_cast<double>(face.profile_times_ns[k] - t_ref) / kNsPerS;
+        const double t = seconds_between(face.profile_times_ns[k], t_ref);
         bool deg = t < margin_lo || t > margin_hi;
         short_record = short_record || deg;
         for (const auto& [b0, b1] : bad)

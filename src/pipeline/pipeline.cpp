@@ -17,6 +17,11 @@ nlohmann::json opt(const std::optional<double>& v) {
     return v ? nlohmann::json(*v) : nlohmann::json();
 }
 
+// Seconds between two clock readings, without int64 overflow on corrupt files (summary only).
+double span_s(std::int64_t later, std::int64_t earlier) {
+    return (static_cast<double>(later) - static_cast<double>(earlier)) * 1e-9;
+}
+
 }  // namespace
 
 FaceSummary summarize(const core::FaceScan& f) {
@@ -28,19 +33,14 @@ FaceSummary summarize(const core::FaceScan& f) {
         s.points += !std::isnan(f.profiles_mm[q]) && !std::isnan(f.profiles_mm[q + 1]);
     const double total = static_cast<double>(s.profiles * s.width);
     s.nan_fraction = total > 0 ? 1.0 - static_cast<double>(s.points) / total : 0.0;
-    if (s.profiles > 1)
-        s.scan_s =
-            static_cast<double>(f.profile_times_ns.back() - f.profile_times_ns.front()) * 1e-9;
+    if (s.profiles > 1) s.scan_s = span_s(f.profile_times_ns.back(), f.profile_times_ns.front());
     s.accel_samples = f.n_accel();
     if (s.accel_samples > 1) {
-        const double span =
-            static_cast<double>(f.accel_times_ns.back() - f.accel_times_ns.front()) * 1e-9;
+        const double span = span_s(f.accel_times_ns.back(), f.accel_times_ns.front());
         s.accel_rate_hz = static_cast<double>(s.accel_samples - 1) / span;
         if (s.profiles > 0) {
-            s.margin_before_s =
-                static_cast<double>(f.profile_times_ns.front() - f.accel_times_ns.front()) * 1e-9;
-            s.margin_after_s =
-                static_cast<double>(f.accel_times_ns.back() - f.profile_times_ns.back()) * 1e-9;
+            s.margin_before_s = span_s(f.profile_times_ns.front(), f.accel_times_ns.front());
+            s.margin_after_s = span_s(f.accel_times_ns.back(), f.profile_times_ns.back());
         }
     }
     return s;
