@@ -100,12 +100,11 @@ TEST(MeasureRobustness, SpikesAndDropouts) {
     }
 }
 
-TEST(MeasureRobustness, DiameterOnA120DegreeArc) {
-    // The top scan stops short: of the boss edge (Diameter 3) it sees only the 120° arc whose
-    // chord lies R/2 from the axis; the through bore (Diameter 7) is not seen at all.
+// A top scan that stops short: of the boss edge (Diameter 3) it sees only the 120° arc whose
+// chord lies R/2 from the axis; the through bore (Diameter 7) is not seen at all.
+sim::SimResult scan_of_a_120_degree_arc() {
     sim::CellConfig cell = env().cell;
-    const double g = env().recipe.material.growth(900.0);
-    const double R3 = 0.5 * 69.5 * g;
+    const double R3 = 0.5 * 69.5 * env().recipe.material.growth(900.0);
     for (auto& f : cell.faces)
         if (f.name == "top") f.scan_length_mm = 120.0 - 0.5 * R3;  // starts at y = −120
     sim::SimOptions o;
@@ -114,14 +113,19 @@ TEST(MeasureRobustness, DiameterOnA120DegreeArc) {
     o.faces = {"top"};
     o.T_world_part = Eigen::Isometry3d::Identity();
     auto s = sim::simulate(env().recipe, cell, o);
-    ASSERT_TRUE(s);
-    const auto m = measure::measure_part(env().recipe, s->recording, s->truth.T_world_part);
+    if (!s) std::abort();
+    return std::move(*s);
+}
+
+TEST(MeasureRobustness, DiameterOnA120DegreeArc) {
+    const auto s = scan_of_a_120_degree_arc();
+    const auto m = measure::measure_part(env().recipe, s.recording, s.truth.T_world_part);
     const auto& d3 = feature(m, "Diameter 3");
     ASSERT_TRUE(d3.hot_mm) << d3.reason;
     EXPECT_NEAR(d3.arc_deg, 120.0, 20.0);
-    EXPECT_NEAR(*d3.hot_mm, s->truth.features[2].hot_mm, 0.03);
+    EXPECT_NEAR(*d3.hot_mm, s.truth.features[2].hot_mm, 0.03);
     std::printf("Diameter 3 on %.0f° of arc: error %+.4f mm (u %.4f)\n", d3.arc_deg,
-                *d3.hot_mm - s->truth.features[2].hot_mm, d3.u_mm);
+                *d3.hot_mm - s.truth.features[2].hot_mm, d3.u_mm);
     const auto& d7 = feature(m, "Diameter 7");
     EXPECT_FALSE(d7.hot_mm);
     EXPECT_EQ(d7.verdict, measure::Verdict::kNotMeasured);
@@ -132,20 +136,10 @@ TEST(MeasureRobustness, PartialArcWithAnOffsetPoseIsNotMeasured) {
     // The same 120° arc, but the pose's axis is 0.3 mm off (inside the 1 mm off-axis guard):
     // centred on that axis the radius would be wrong by ~0.5 mm; a free fit disagrees, so the
     // value is refused rather than reported with a small uncertainty.
-    sim::CellConfig cell = env().cell;
-    const double g = env().recipe.material.growth(900.0);
-    for (auto& f : cell.faces)
-        if (f.name == "top") f.scan_length_mm = 120.0 - 0.25 * 69.5 * g;
-    sim::SimOptions o;
-    o.seed = 7;
-    o.temperature_c = 900.0;
-    o.faces = {"top"};
-    o.T_world_part = Eigen::Isometry3d::Identity();
-    auto s = sim::simulate(env().recipe, cell, o);
-    ASSERT_TRUE(s);
-    Eigen::Isometry3d off = s->truth.T_world_part;
+    const auto s = scan_of_a_120_degree_arc();
+    Eigen::Isometry3d off = s.truth.T_world_part;
     off.translation().y() += 0.3;
-    const auto m = measure::measure_part(env().recipe, s->recording, off);
+    const auto m = measure::measure_part(env().recipe, s.recording, off);
     const auto& d3 = feature(m, "Diameter 3");
     EXPECT_FALSE(d3.hot_mm) << *d3.hot_mm;
     EXPECT_NE(d3.reason.find("free fit"), std::string::npos) << d3.reason;
