@@ -632,16 +632,20 @@ class FeatureMeasurer {
     }
 
   private:
+    // Facing every face's sensor: the annulus's outward normal points against each view.
+    static bool faces_sensors(const Annulus& a, const std::vector<const FaceFrame*>& frames) {
+        for (const auto* fr : frames)
+            if (a.facing * fr->view.z() >= 0) return false;
+        return true;
+    }
+
     // The visible annulus at `level` next to radius R (nominal, cold), or an error.
     std::optional<Annulus> annulus(const std::string& level, double R,
                                    const std::vector<const FaceFrame*>& frames, std::string& why) {
         const double z = *recipe_.level(level);
         for (const auto& a : annuli_at(solid_, z)) {
-            if (R >= 0 && a.lo != R && a.hi != R) continue;
-            // Facing the sensor: the outward normal points against the view direction.
-            bool visible = true;
-            for (const auto* fr : frames) visible = visible && a.facing * fr->view.z() < 0;
-            if (!visible) {
+            if (a.lo != R && a.hi != R) continue;
+            if (!faces_sensors(a, frames)) {
                 why = "the face at level '" + level + "' does not face the sensor of " +
                       frames.front()->scan->name;
                 continue;
@@ -870,15 +874,12 @@ class FeatureMeasurer {
         PlaneResult pl[2];
         const std::string levels[2] = {f.from_level, f.to_level};
         for (int j = 0; j < 2; ++j) {
-            std::string why;
             // The widest visible annulus at the level.
             std::optional<Annulus> best;
             const double z = *recipe_.level(levels[j]);
-            for (const auto& a : annuli_at(solid_, z)) {
-                bool visible = true;
-                for (const auto* fr : frames) visible = visible && a.facing * fr->view.z() < 0;
-                if (visible && (!best || a.hi - a.lo > best->hi - best->lo)) best = a;
-            }
+            for (const auto& a : annuli_at(solid_, z))
+                if (faces_sensors(a, frames) && (!best || a.hi - a.lo > best->hi - best->lo))
+                    best = a;
             if (!best) {
                 r.reason = "no flat face at level '" + levels[j] + "' facing the sensor";
                 return;
