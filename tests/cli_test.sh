@@ -55,17 +55,31 @@ for f in m["features"]:
 print("json ok:", sum(f["hot_mm"] is not None for f in m["features"]), "features measured")
 PY
 
-# No pose at all (no truth beside the recording, no --part-pose): nothing is measured, and
-# every feature says why.
+# The default: the part is found in the scans (no truth needed), and measured.
 mv "$tmp/rec.truth" "$tmp/truth.moved"
-"$bin" measure "$tmp/rec" --json > "$tmp/nopose.json"
-/usr/bin/python3 - "$tmp/nopose.json" <<'PY' || fail "no pose must mean not measured"
-import json, sys
+"$bin" measure "$tmp/rec" --json > "$tmp/match.json"
+/usr/bin/python3 - "$tmp/match.json" "$tmp/truth.moved/truth.yaml" <<'PY' || fail "matching by default"
+import json, sys, yaml
 m = json.load(open(sys.argv[1]))
-assert m["verdict"] == "NOT_MEASURED"
-assert all(f["hot_mm"] is None and "pose" in f["reason"] for f in m["features"])
+truth = {f["name"]: f for f in yaml.safe_load(open(sys.argv[2]))["features"]}
+assert m["pose_source"] == "match", m["pose_source"]
+assert m["match"]["found"] and m["match"]["score"] >= 0.8, m["match"]
+assert len(m["match"]["world_from_part"]) == 4
+for f in m["features"]:
+    if f["hot_mm"] is not None:
+        assert abs(f["hot_mm"] - truth[f["name"]]["hot_mm"]) < 0.5, (f["name"], f["hot_mm"])
+assert sum(f["hot_mm"] is not None for f in m["features"]) >= 10
+print("match ok: score", m["match"]["score"])
 PY
+# --pose truth needs the truth: without it, a clear error.
+set +e
+"$bin" measure "$tmp/rec" --pose truth 2> "$tmp/err"; rc=$?
+set -e
+[ $rc -eq 1 ] || fail "--pose truth without a truth exited $rc"
+grep -q "part_pose.yaml not found" "$tmp/err" || fail "--pose truth error: $(cat "$tmp/err")"
 mv "$tmp/truth.moved" "$tmp/rec.truth"
+"$bin" measure "$tmp/rec" --pose truth --json > "$tmp/truth.json"
+grep -q '"pose_source":"truth ' "$tmp/truth.json" || fail "--pose truth not used"
 
 # Bad input: a clear message naming the file, exit code 1, no crash.
 set +e

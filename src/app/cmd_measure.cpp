@@ -6,6 +6,7 @@
 
 #include "commands.hpp"
 #include "hotgauge/core/geometry.hpp"
+#include "hotgauge/io/model_io.hpp"
 #include "hotgauge/io/ply.hpp"
 #include "hotgauge/io/pose_io.hpp"
 #include "hotgauge/io/recipe.hpp"
@@ -19,8 +20,10 @@ namespace fs = std::filesystem;
 
 struct MeasureArgs {
     std::string recording;
-    std::string recipe;     // default: config/parts/<recording's recipe>.yaml
-    std::string part_pose;  // default: REC.truth/part_pose.yaml when present
+    std::string recipe;          // default: config/parts/<recording's recipe>.yaml
+    std::string pose = "match";  // match | truth
+    std::string part_pose;       // a pose file: no matching
+    std::string model;           // a saved model (hotgauge model build); default: from the recipe
     std::string ply;
     bool json = false;
     bool no_compensation = false;
@@ -47,10 +50,17 @@ int run(const MeasureArgs& a) {
     opt.compensation.clock_offset_s = a.clock_offset_ms * 1e-3;
     if (a.highpass_hz > 0) opt.compensation.highpass_hz = a.highpass_hz;
     std::string pose_file = a.part_pose;
-    if (pose_file.empty()) {
-        const fs::path truth =
-            fs::path(a.recording).lexically_normal().string() + ".truth/part_pose.yaml";
-        if (fs::exists(truth)) pose_file = truth.string();
+    if (a.pose == "truth") {
+        if (!pose_file.empty()) {
+            spdlog::error("give either --pose truth or --part-pose, not both");
+            return 1;
+        }
+        pose_file = fs::path(a.recording).lexically_normal().string() + ".truth/part_pose.yaml";
+        if (!fs::exists(pose_file)) {
+            spdlog::error("--pose truth: {} not found (only simulated recordings have a truth)",
+                          pose_file);
+            return 1;
+        }
     }
     if (!pose_file.empty()) {
         auto pose = io::read_part_pose(pose_file);
@@ -59,7 +69,21 @@ int run(const MeasureArgs& a) {
             return 1;
         }
         opt.T_world_part = *pose;
-        opt.pose_source = "file " + pose_file;
+        opt.pose_source = (a.pose == "truth" ? "truth " : "file ") + pose_file;
+    }
+    std::optional<match::Model> model;
+    if (!a.model.empty()) {
+        auto m = io::read_model(a.model);
+        if (!m) {
+            spdlog::error("{}", m.error().message);
+            return 1;
+        }
+        if (m->name != recipe->name) {
+            spdlog::error("{}: model of part '{}', recipe is '{}'", a.model, m->name, recipe->name);
+            return 1;
+        }
+        model = std::move(*m);
+        opt.model = &*model;
     }
     const pipeline::PartResult result = pipeline::run(*rec, *recipe, opt);
     for (const auto& w : result.warnings) spdlog::warn("{}", w);
@@ -90,8 +114,15 @@ Command add_measure(CLI::App& app) {
     auto* s = app.add_subcommand("measure", "measure a recording (offline pipeline)");
     s->add_option("recording", a->recording, "recording folder (hotgauge-recording/1)")->required();
     s->add_option("--recipe", a->recipe, "part recipe (default: config/parts/<recipe>.yaml)");
-    s->add_option("--part-pose", a->part_pose,
-                  "part pose file (world_from_part); default REC.truth/part_pose.yaml if present");
+    s->add_option("--pose", a->pose,
+                  "where the part pose comes from: match (find it in the scans) or truth "
+                  "(REC.truth/part_pose.yaml, simulated recordings)")
+        ->check(CLI::IsMember({"match", "truth"}))
+        ->capture_default_str();
+    s->add_option("--part-pose", a->part_pose, "part pose file (world_from_part): no matching");
+    s->add_option("--model", a->model,
+                  "PPF model file (hotgauge model build); default: built "
+                  "from the recipe");
     s->add_flag("--json", a->json, "print one JSON object (docs/measure-output.md)");
     s->add_flag("--no-compensation", a->no_compensation, "measure without vibration compensation");
     s->add_option("--clock-offset-ms", a->clock_offset_ms,

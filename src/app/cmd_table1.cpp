@@ -75,12 +75,12 @@ int run(const Table1Args& a) {
             spdlog::error("{}", s.error().message);
             return 1;
         }
+        // The pose is found in the compensated scans; the uncompensated column reuses it, so
+        // that the two columns differ by compensation only.
         pipeline::PipelineOptions p;
-        p.T_world_part = s->truth.T_world_part;
-        p.pose_source = "simulator truth";
         double v[2] = {NAN, NAN};
         std::string why[2];
-        for (int comp = 0; comp < 2; ++comp) {
+        for (int comp : {1, 0}) {
             p.compensate = comp == 1;
             // Uncompensated is measured as a plain fit would (the paper's "before" column): the
             // plausibility guards that refuse a distorted edge are off for it, so that the
@@ -92,6 +92,10 @@ int run(const Table1Args& a) {
                 p.measure.max_plane_tilt_deg = 90.0;
             }
             const auto r = pipeline::run(s->recording, *recipe, p);
+            if (r.match && r.match->found) {
+                p.T_world_part = r.match->T_world_part;
+                p.pose_source = "match (compensated scans)";
+            }
             for (const auto& f : r.measurement.features)
                 if (f.name == a.feature) {
                     if (f.cold_mm) v[comp] = *f.cold_mm;

@@ -12,5 +12,6 @@ Command add_simulate(CLI::App& app);
 Command add_measure(CLI::App& app);
 Command add_table1(CLI::App& app);
 Command add_fit(CLI::App& app);
+Command add_model(CLI::App& app);
 
 }  // namespace hotgauge::app

@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
     add(hotgauge::app::add_measure);
     add(hotgauge::app::add_table1);
     add(hotgauge::app::add_fit);
+    add(hotgauge::app::add_model);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

@@ -111,7 +111,8 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
     const YamlReader y(file.string());
     return y.guarded<Recipe>([&] {
         const YAML::Node root = y.load();
-        y.expect_map(root, "recipe", {"part", "description", "geometry", "material", "features"});
+        y.expect_map(root, "recipe",
+                     {"part", "description", "geometry", "material", "matching", "features"});
         Recipe r;
         r.source = file.string();
         r.name = y.string(y.require(root, "recipe", "part"), "part");
@@ -156,6 +157,16 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
             }
         } else {
             y.fail(root, "recipe: missing key 'material' (the thermal model is required)");
+        }
+
+        if (const YAML::Node m = root["matching"]) {
+            y.expect_map(m, "matching", {"sampling_mm", "min_score"});
+            r.matching.sampling_mm = y.number_or(m, "matching", "sampling_mm", 5.0);
+            r.matching.min_score = y.number_or(m, "matching", "min_score", 0.8);
+            if (!(r.matching.sampling_mm >= 0.5 && r.matching.sampling_mm <= 50.0))
+                y.fail(m["sampling_mm"], "matching.sampling_mm: expected 0.5 .. 50 mm");
+            if (!(r.matching.min_score > 0.0 && r.matching.min_score < 1.0))
+                y.fail(m["min_score"], "matching.min_score: expected a fraction in (0, 1)");
         }
 
         const YAML::Node fl = y.require(root, "recipe", "features");

@@ -56,12 +56,6 @@ PartResult run(const core::Recording& rec, const core::Recipe& recipe, const Pip
     if (rec.recipe != recipe.name)
         r.warnings.push_back("recording names recipe '" + rec.recipe + "', measured with '" +
                              recipe.name + "'");
-    if (!o.T_world_part) {
-        r.measurement = measure::unmeasured(
-            recipe, rec, "no part pose: pose estimation is not available yet; give --part-pose");
-        return r;
-    }
-    r.pose_source = o.pose_source;
     measure::FaceDisplacements u;
     if (o.compensate) {
         const auto t0 = Clock::now();
@@ -80,8 +74,41 @@ PartResult run(const core::Recording& rec, const core::Recipe& recipe, const Pip
         }
         r.stage_ms.emplace_back("compensate", ms_since(t0));
     }
+    std::optional<Eigen::Isometry3d> T_world_part = o.T_world_part;
+    if (T_world_part) {
+        r.pose_source = o.pose_source;
+    } else {
+        const auto t0 = Clock::now();
+        std::optional<match::Model> built;
+        const match::Model* model = o.model;
+        if (!model) {
+            match::ModelConfig mc;
+            mc.sampling_mm = recipe.matching.sampling_mm;
+            auto m = match::model_from_recipe(recipe, mc);
+            if (!m) {
+                r.measurement =
+                    measure::unmeasured(recipe, rec, "no part model: " + m.error().message);
+                return r;
+            }
+            built = std::move(*m);
+            model = &*built;
+        }
+        match::MatchConfig cfg = o.match;
+        cfg.min_score = recipe.matching.min_score;
+        // The hot part is larger than the cold model: scale it when the temperature is known,
+        // let ICP estimate the scale when it is not.
+        if (rec.temperature_c) cfg.scale = recipe.material.growth(*rec.temperature_c);
+        r.match = match::match(*model, rec, u, cfg);
+        r.stage_ms.emplace_back("match", ms_since(t0));
+        if (!r.match->found) {
+            r.measurement = measure::unmeasured(recipe, rec, r.match->reason);
+            return r;
+        }
+        T_world_part = r.match->T_world_part;
+        r.pose_source = "match";
+    }
     const auto t1 = Clock::now();
-    r.measurement = measure::measure_part(recipe, rec, *o.T_world_part, u, o.measure);
+    r.measurement = measure::measure_part(recipe, rec, *T_world_part, u, o.measure);
     r.stage_ms.emplace_back("measure", ms_since(t1));
     return r;
 }
@@ -97,6 +124,33 @@ std::string to_json(const PartResult& r) {
     j["growth"] = opt(m.growth);
     j["verdict"] = measure::to_string(m.verdict);
     j["pose_source"] = r.pose_source.empty() ? json() : json(r.pose_source);
+    if (r.match) {
+        const auto& mr = *r.match;
+        json pose;
+        pose["found"] = mr.found;
+        pose["reason"] = mr.reason.empty() ? json() : json(mr.reason);
+        pose["score"] = mr.score;
+        pose["inliers"] = mr.inliers;
+        pose["rms_mm"] = mr.rms_mm;
+        pose["scale"] = mr.scale;
+        pose["scale_estimated"] = mr.scale_estimated;
+        pose["votes"] = mr.votes;
+        pose["hypotheses"] = mr.hypotheses;
+        pose["icp_iterations"] = mr.iterations;
+        pose["scene_samples"] = mr.scene_points;
+        pose["background_removed"] = mr.background_removed;
+        json T = json::array();
+        for (int i = 0; i < 4; ++i)
+            T.push_back({mr.T_world_part(i, 0), mr.T_world_part(i, 1), mr.T_world_part(i, 2),
+                         mr.T_world_part(i, 3)});
+        pose["world_from_part"] = T;
+        json ms = json::object();
+        for (const auto& [k, v] : mr.stage_ms) ms[k] = v;
+        pose["stage_ms"] = ms;
+        j["match"] = pose;
+    } else {
+        j["match"] = json();
+    }
     j["degraded"] = r.degraded;
     j["degraded_reasons"] = r.degraded_reasons;
     json comp = json::object();
@@ -166,6 +220,21 @@ std::string to_table(const PartResult& r) {
                   r.pose_source.empty() ? "none" : r.pose_source.c_str(),
                   measure::to_string(m.verdict), r.degraded ? " (DEGRADED)" : "");
     s += line;
+    if (r.match) {
+        const auto& mr = *r.match;
+        const Eigen::Vector3d a = mr.T_world_part.linear().col(2),
+                              o = mr.T_world_part.translation();
+        if (mr.found)
+            std::snprintf(line, sizeof line,
+                          "match: score %.3f (%lld points), rms %.4f mm, scale %.5f%s, axis "
+                          "(%.5f %.5f %.5f) through (%.3f %.3f %.3f) mm\n",
+                          mr.score, static_cast<long long>(mr.inliers), mr.rms_mm, mr.scale,
+                          mr.scale_estimated ? " (estimated)" : "", a.x(), a.y(), a.z(), o.x(),
+                          o.y(), o.z());
+        else
+            std::snprintf(line, sizeof line, "match: %s\n", mr.reason.c_str());
+        s += line;
+    }
     std::snprintf(line, sizeof line, "%-8s %8s %6s %10s %6s %8s %8s %8s %9s %9s\n", "face",
                   "profiles", "width", "points", "NaN %", "scan s", "accel", "accel Hz", "before s",
                   "after s");

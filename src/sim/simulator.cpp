@@ -117,6 +117,20 @@ core::Result<SimResult> simulate(const core::Recipe& recipe, const CellConfig& c
     truth.T_world_part =
         opt.T_world_part ? *opt.T_world_part : random_placement(cell, bottom_radius, rng);
     const Eigen::Isometry3d T_part_world = truth.T_world_part.inverse();
+    if (opt.occluded_fraction > 0) {
+        std::uniform_real_distribution<double> az(0.0, 2.0 * std::numbers::pi);
+        truth.occluded_from_rad = az(rng);
+        truth.occluded_rad = 2.0 * std::numbers::pi * std::min(1.0, opt.occluded_fraction);
+    }
+    // Rays that hit the part inside the occluded sector return nothing.
+    auto occluded = [&](const Eigen::Vector3d& p_world) {
+        if (truth.occluded_rad <= 0) return false;
+        const Eigen::Vector3d q = T_part_world * p_world;
+        if (std::abs(solid.distance(q)) > 1e-3) return false;  // the support, not the part
+        double a = std::atan2(q.y(), q.x()) - truth.occluded_from_rad;
+        a -= 2.0 * std::numbers::pi * std::floor(a / (2.0 * std::numbers::pi));
+        return a < truth.occluded_rad;
+    };
 
     // Timeline: face j is scanned after face j−1 plus the robot's move; accelerometer margins.
     const auto& s = cell.sensor;
@@ -187,6 +201,7 @@ core::Result<SimResult> simulate(const core::Recipe& recipe, const CellConfig& c
                                       cell.support_half_size_mm, origin, d, 1e4);
                 if (!hit) continue;
                 const Eigen::Vector3d p = origin + hit->t * d;
+                if (occluded(p)) continue;
                 const double range_z = hit->t * dir_cam[i].z();
                 if (range_z < s.min_range_mm || range_z > s.max_range_mm) continue;
                 if (std::abs(hit->normal.dot(d)) < cos_max_incidence) continue;

@@ -45,6 +45,12 @@ struct FeatureSpec {
     int slot = 0;               // result slot (PLC register block index), 1-based
 };
 
+// How the part is found in the scans (docs/matching.md); recipe key `matching`.
+struct MatchingSpec {
+    double sampling_mm = 5.0;  // model and scene sampling distance of the PPF voting
+    double min_score = 0.8;    // fraction of scan points near the part that lie on the model
+};
+
 struct Recipe {
     std::string name;
     std::string source;     // file it came from, for messages
@@ -52,6 +58,7 @@ struct Recipe {
     std::vector<std::pair<std::string, double>> levels_mm;  // named z levels, part frame, cold
     std::vector<Section> outer, inner;
     ThermalModel material;
+    MatchingSpec matching;
     std::vector<FeatureSpec> features;
 
     std::optional<double> level(const std::string& level_name) const;

@@ -10,14 +10,19 @@
 #include "hotgauge/compensate/compensate.hpp"
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/recording.hpp"
+#include "hotgauge/match/match.hpp"
 #include "hotgauge/measure/features.hpp"
 
 namespace hotgauge::pipeline {
 
 struct PipelineOptions {
-    std::optional<Eigen::Isometry3d> T_world_part;  // known pose (truth file, --part-pose)
-    std::string pose_source;                        // where it came from, for the report
-    bool compensate = true;                         // vibration compensation (--no-compensation)
+    // A known pose (--part-pose, --pose truth) skips matching; otherwise the part is found in
+    // the scans with `model` (a loaded model file), or a model built from the recipe.
+    std::optional<Eigen::Isometry3d> T_world_part;
+    std::string pose_source;  // where a known pose came from, for the report
+    const match::Model* model = nullptr;
+    match::MatchConfig match;  // min_score and sampling come from the recipe
+    bool compensate = true;    // vibration compensation (--no-compensation)
     compensate::CompensationConfig compensation;
     measure::MeasureConfig measure;
 };
@@ -45,7 +50,8 @@ FaceSummary summarize(const core::FaceScan& face);
 
 struct PartResult {
     std::string part_id, recipe, captured_at;
-    std::string pose_source;  // "" when no pose: nothing measured
+    std::string pose_source;  // "match", or where a given pose came from; "" = no pose
+    std::optional<match::MatchResult> match;  // when matching ran
     std::vector<FaceSummary> faces;
     bool compensated = false;  // compensation was requested and ran
     std::vector<FaceCompensationSummary> compensation;

@@ -84,6 +84,9 @@ struct SimOptions {
     std::string captured_at;         // default: now (UTC)
     std::int64_t t0_ns = 0;          // clock of the first accelerometer sample; 0: from now
     std::vector<std::string> faces;  // subset of the cell's faces; empty = all
+    // Occlusion: a contiguous sector of the part, this fraction of the full turn at a random
+    // azimuth, returns nothing in every face (a gripper finger, loose scale, steam).
+    double occluded_fraction = 0.0;
 };
 
 struct FeatureTruth {
@@ -108,6 +111,7 @@ struct SimTruth {
     std::vector<FaceTruth> faces;
     double range_noise_mm = 0;
     double support_half_size_mm = 0;
+    double occluded_from_rad = 0, occluded_rad = 0;  // occluded sector, part-frame azimuth
     // The hot part as scanned, part frame.
     core::AxisymmetricSolid solid(const core::Recipe& recipe) const {
         return core::AxisymmetricSolid::from_recipe(recipe, levels_mm, diameters_mm, growth);

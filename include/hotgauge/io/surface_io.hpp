@@ -1,0 +1,34 @@
+#pragma once
+// Surface sources of a PPF model (docs/model-file.md): a mesh (PLY, STL) sampled into oriented
+// points, or a reference scan (PLY, PCD) with its normals read or estimated. Both feed
+// match::model_from_samples; coordinates are taken as the part frame, in mm.
+#include <Eigen/Core>
+#include <filesystem>
+#include <vector>
+
+#include "hotgauge/core/result.hpp"
+
+namespace hotgauge::io {
+
+struct SurfaceSamples {
+    std::vector<Eigen::Vector3f> points;   // mm
+    std::vector<Eigen::Vector3f> normals;  // unit, one per point
+};
+
+// Samples the triangles of a mesh uniformly by area (fixed seed: the same file gives the same
+// samples), about one sample per spacing_mm² of surface, each with its triangle's normal
+// (right-hand winding: counter-clockwise seen from outside is outward).
+// PLY: ascii or binary_little_endian; vertex x, y, z (float or double); face list of
+// vertex_indices (any integer types), polygons fan-triangulated. STL: ascii or binary.
+// Degenerate triangles are skipped; a file without a usable triangle is an error.
+core::Result<SurfaceSamples> read_mesh_samples(const std::filesystem::path& path,
+                                               double spacing_mm);
+
+// The points of a scan. PLY (vertex x, y, z, optional nx, ny, nz) or PCD v0.7 (ascii or binary;
+// fields x y z, optional normal_x normal_y normal_z; other fields skipped). Points with a
+// non-finite coordinate or normal are dropped. Without normals in the file, each normal is the
+// PCA normal of the point's 12 nearest neighbours, oriented towards +z (the sensor looks down
+// the scan's −z); on walls parallel to z that orientation is arbitrary.
+core::Result<SurfaceSamples> read_scan_samples(const std::filesystem::path& path);
+
+}  // namespace hotgauge::io

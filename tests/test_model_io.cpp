@@ -1,0 +1,677 @@
+// Model files (docs/model-file.md): bit-exact round trips and a clear error for every kind of bad
+// file; mesh and scan sources: samples on a known cube with outward normals, PCA normals of a
+// plane.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "hotgauge/io/model_io.hpp"
+#include "hotgauge/io/recipe.hpp"
+#include "hotgauge/io/surface_io.hpp"
+#include "hotgauge/match/model.hpp"
+
+namespace fs = std::filesystem;
+using hotgauge::io::read_mesh_samples;
+using hotgauge::io::read_model;
+using hotgauge::io::read_scan_samples;
+using hotgauge::io::SurfaceSamples;
+using hotgauge::io::write_model;
+using hotgauge::match::Model;
+
+namespace {
+
+using Bytes = std::vector<unsigned char>;
+
+class TempDir : public ::testing::Test {
+  protected:
+    void SetUp() override {
+        dir_ = fs::temp_directory_path() /
+               ("hotgauge_model_io_" + std::to_string(::getpid()) + "_" +
+                ::testing::UnitTest::GetInstance()->current_test_info()->name());
+        fs::remove_all(dir_);
+        fs::create_directories(dir_);
+    }
+    void TearDown() override { fs::remove_all(dir_); }
+    fs::path path(const std::string& name) const { return dir_ / name; }
+
+    fs::path dir_;
+};
+
+Bytes read_all(const fs::path& p) {
+    std::ifstream f(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(f), {}};
+}
+
+void write_all(const fs::path& p, const Bytes& b) {
+    std::ofstream(p, std::ios::binary | std::ios::trunc)
+        .write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+}
+
+void write_text(const fs::path& p, const std::string& s) {
+    std::ofstream(p, std::ios::binary | std::ios::trunc) << s;
+}
+
+Model recipe_model(double sampling_mm = 5.0) {
+    auto recipe = hotgauge::io::read_recipe(HOTGAUGE_SOURCE_DIR "/config/parts/hub-a.yaml");
+    EXPECT_TRUE(recipe) << recipe.error().message;
+    hotgauge::match::ModelConfig config;
+    config.sampling_mm = sampling_mm;
+    auto m = hotgauge::match::model_from_recipe(*recipe, config);
+    EXPECT_TRUE(m) << m.error().message;
+    return *m;
+}
+
+// ---- byte-level helpers of the documented layout (docs/model-file.md) ----
+
+std::uint64_t fnv1a64(const Bytes& b, std::size_t n) {
+    std::uint64_t h = 0xcbf29ce484222325ull;
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ b[i]) * 0x100000001b3ull;
+    return h;
+}
+
+void put_le(Bytes& b, std::size_t at, std::uint64_t v, int n) {
+    for (int i = 0; i < n; ++i) b[at + i] = static_cast<unsigned char>(v >> (8 * i));
+}
+
+// Recomputes the trailing checksum after an edit, so that the reader gets past it.
+void reseal(Bytes& b) { put_le(b, b.size() - 8, fnv1a64(b, b.size() - 8), 8); }
+
+// Offset of the first reference index (after name, source, config, flag, diameter, step,
+// points, normals, refs count).
+std::size_t refs_offset(const Model& m) {
+    return 20 + 8 + m.name.size() + 8 + m.source.size() + 24 + 1 + 16 + 8 + 12 * m.points.size() +
+           8 + 12 * m.normals.size() + 8;
+}
+
+// ---- field-by-field, bit-exact comparison ----
+
+template <class T>
+bool same_bits(const T& a, const T& b) {
+    return std::memcmp(&a, &b, sizeof(T)) == 0;
+}
+
+void expect_same_vectors(const std::vector<Eigen::Vector3f>& a,
+                         const std::vector<Eigen::Vector3f>& b, const char* what) {
+    ASSERT_EQ(a.size(), b.size()) << what;
+    for (std::size_t i = 0; i < a.size(); ++i)
+        for (int k = 0; k < 3; ++k)
+            ASSERT_TRUE(same_bits(a[i][k], b[i][k])) << what << "[" << i << "]";
+}
+
+void expect_same_model(const Model& a, const Model& b) {
+    EXPECT_EQ(a.name, b.name);
+    EXPECT_EQ(a.source, b.source);
+    EXPECT_TRUE(same_bits(a.config.sampling_mm, b.config.sampling_mm));
+    EXPECT_TRUE(same_bits(a.config.distance_step_mm, b.config.distance_step_mm));
+    EXPECT_EQ(a.config.angle_bins, b.config.angle_bins);
+    EXPECT_EQ(a.config.alpha_bins, b.config.alpha_bins);
+    EXPECT_EQ(a.axisymmetric, b.axisymmetric);
+    EXPECT_TRUE(same_bits(a.diameter_mm, b.diameter_mm));
+    EXPECT_TRUE(same_bits(a.step_mm, b.step_mm));
+    expect_same_vectors(a.points, b.points, "points");
+    expect_same_vectors(a.normals, b.normals, "normals");
+    EXPECT_EQ(a.refs, b.refs);
+    ASSERT_EQ(a.profile.size(), b.profile.size());
+    for (std::size_t i = 0; i < a.profile.size(); ++i) {
+        EXPECT_EQ(a.profile[i].cylinder, b.profile[i].cylinder);
+        EXPECT_TRUE(same_bits(a.profile[i].value, b.profile[i].value));
+        EXPECT_TRUE(same_bits(a.profile[i].lo, b.profile[i].lo));
+        EXPECT_TRUE(same_bits(a.profile[i].hi, b.profile[i].hi));
+    }
+    expect_same_vectors(a.dense_points, b.dense_points, "dense_points");
+    expect_same_vectors(a.dense_normals, b.dense_normals, "dense_normals");
+    EXPECT_EQ(a.key_begin, b.key_begin);
+    ASSERT_EQ(a.entries.size(), b.entries.size());
+    for (std::size_t i = 0; i < a.entries.size(); ++i) {
+        ASSERT_EQ(a.entries[i].ref, b.entries[i].ref) << i;
+        ASSERT_TRUE(same_bits(a.entries[i].alpha, b.entries[i].alpha)) << i;
+    }
+}
+
+// ---- a closed cube [lo, lo + size]³ as a mesh: 8 vertices, 6 outward quads ----
+
+const Eigen::Vector3d kCubeLo(1.0, -2.0, 3.0);
+constexpr double kCubeSize = 10.0;
+
+std::vector<Eigen::Vector3d> cube_vertices() {
+    std::vector<Eigen::Vector3d> v;
+    for (int i = 0; i < 8; ++i)
+        v.push_back(kCubeLo + kCubeSize * Eigen::Vector3d(i & 1, (i >> 1) & 1, (i >> 2) & 1));
+    return v;
+}
+
+// Counter-clockwise seen from outside.
+const std::vector<std::array<int, 4>> kCubeQuads = {
+    {0, 2, 3, 1},  // z = lo, normal −z
+    {4, 5, 7, 6},  // z = hi, +z
+    {0, 1, 5, 4},  // y = lo, −y
+    {2, 6, 7, 3},  // y = hi, +y
+    {0, 4, 6, 2},  // x = lo, −x
+    {1, 3, 7, 5},  // x = hi, +x
+};
+
+std::vector<std::array<int, 3>> cube_triangles() {
+    std::vector<std::array<int, 3>> t;
+    for (const auto& q : kCubeQuads) {
+        t.push_back({q[0], q[1], q[2]});
+        t.push_back({q[0], q[2], q[3]});
+    }
+    return t;
+}
+
+std::string cube_ply_ascii_quads() {
+    std::ostringstream s;
+    s << "ply\nformat ascii 1.0\ncomment a cube\nelement vertex 8\nproperty float x\n"
+         "property float y\nproperty float z\nelement face 6\n"
+         "property list uchar int vertex_indices\nend_header\n";
+    for (const auto& v : cube_vertices()) s << v.x() << ' ' << v.y() << ' ' << v.z() << '\n';
+    for (const auto& q : kCubeQuads)
+        s << "4 " << q[0] << ' ' << q[1] << ' ' << q[2] << ' ' << q[3] << '\n';
+    return s.str();
+}
+
+template <class T>
+void append(Bytes& b, T v) {
+    const auto* p = reinterpret_cast<const unsigned char*>(&v);
+    b.insert(b.end(), p, p + sizeof(T));
+}
+
+// Binary PLY of triangles with double coordinates, an extra per-vertex property, int counts
+// and uint indices, and an extra face property: the reader must skip what it does not use.
+Bytes cube_ply_binary() {
+    const std::string header =
+        "ply\nformat binary_little_endian 1.0\nelement vertex 8\nproperty double x\n"
+        "property double y\nproperty double z\nproperty uchar red\nelement face 12\n"
+        "property list int uint vertex_indices\nproperty float quality\nend_header\n";
+    Bytes b(header.begin(), header.end());
+    for (const auto& v : cube_vertices()) {
+        append(b, v.x());
+        append(b, v.y());
+        append(b, v.z());
+        append(b, std::uint8_t{200});
+    }
+    for (const auto& t : cube_triangles()) {
+        append(b, std::int32_t{3});
+        for (int i : t) append(b, static_cast<std::uint32_t>(i));
+        append(b, 1.0f);
+    }
+    return b;
+}
+
+std::string cube_stl_ascii() {
+    const auto v = cube_vertices();
+    std::ostringstream s;
+    s << "solid cube made by hand\n";
+    for (const auto& t : cube_triangles()) {
+        s << "  facet normal 0 0 0\n    outer loop\n";  // winding, not the stored normal, counts
+        for (int i : t)
+            s << "      vertex " << v[i].x() << ' ' << v[i].y() << ' ' << v[i].z() << '\n';
+        s << "    endloop\n  endfacet\n";
+    }
+    s << "endsolid cube made by hand\n";
+    return s.str();
+}
+
+Bytes cube_stl_binary() {
+    Bytes b(80, ' ');
+    const std::string head = "solid but binary";  // a header that starts like ascii STL
+    std::copy(head.begin(), head.end(), b.begin());
+    const auto v = cube_vertices();
+    const auto tris = cube_triangles();
+    append(b, static_cast<std::uint32_t>(tris.size()));
+    for (const auto& t : tris) {
+        for (int k = 0; k < 3; ++k) append(b, 0.0f);
+        for (int i : t)
+            for (int k = 0; k < 3; ++k) append(b, static_cast<float>(v[i][k]));
+        append(b, std::uint16_t{0});
+    }
+    return b;
+}
+
+// Every sample lies on the cube face its normal names, the normals are the outward unit axes,
+// the count is area / spacing² within 10 %, and the faces share the samples by area.
+void expect_cube_samples(const SurfaceSamples& s, double spacing_mm) {
+    const double expected = 6 * kCubeSize * kCubeSize / (spacing_mm * spacing_mm);
+    ASSERT_EQ(s.points.size(), s.normals.size());
+    EXPECT_NEAR(static_cast<double>(s.points.size()), expected, 0.1 * expected);
+    std::array<int, 6> per_face{};
+    for (std::size_t i = 0; i < s.points.size(); ++i) {
+        const Eigen::Vector3d p = s.points[i].cast<double>(), n = s.normals[i].cast<double>();
+        int axis = 0;
+        n.cwiseAbs().maxCoeff(&axis);
+        Eigen::Vector3d outward = Eigen::Vector3d::Zero();
+        outward[axis] = n[axis] > 0 ? 1 : -1;
+        ASSERT_LT((n - outward).norm(), 1e-6) << "sample " << i << " normal " << n.transpose();
+        const double plane = kCubeLo[axis] + (n[axis] > 0 ? kCubeSize : 0.0);
+        ASSERT_LT(std::abs(p[axis] - plane), 1e-4) << "sample " << i << " at " << p.transpose();
+        for (int k = 0; k < 3; ++k) {
+            ASSERT_GE(p[k], kCubeLo[k] - 1e-4) << i;
+            ASSERT_LE(p[k], kCubeLo[k] + kCubeSize + 1e-4) << i;
+        }
+        ++per_face[2 * axis + (n[axis] > 0)];
+    }
+    for (int f = 0; f < 6; ++f) EXPECT_NEAR(per_face[f], expected / 6, 0.1 * expected / 6) << f;
+}
+
+std::string error_of(const hotgauge::core::Result<Model>& r) {
+    EXPECT_FALSE(r) << "accepted a bad file";
+    return r ? "" : r.error().message;
+}
+
+}  // namespace
+
+// ---- model files ----
+
+using ModelFile = TempDir;
+
+TEST_F(ModelFile, RecipeModelRoundTripIsBitExact) {
+    const Model m = recipe_model();
+    ASSERT_TRUE(m.axisymmetric);
+    ASSERT_FALSE(m.entries.empty());
+    const fs::path p = path("hub-a.hgm");
+    ASSERT_TRUE(write_model(m, p));
+    EXPECT_FALSE(fs::exists(p.string() + ".tmp"));
+    auto back = read_model(p);
+    ASSERT_TRUE(back) << back.error().message;
+    expect_same_model(m, *back);
+    // Writing what was read gives the same bytes; overwriting an existing file works.
+    const Bytes first = read_all(p);
+    ASSERT_TRUE(write_model(*back, p));
+    EXPECT_EQ(read_all(p), first);
+    const Bytes magic = {'H', 'G', 'P', 'P', 'F', 0, '\r', '\n', 1, 0, 0, 0};
+    EXPECT_TRUE(std::equal(magic.begin(), magic.end(), first.begin()));
+}
+
+TEST_F(ModelFile, SampleModelRoundTripIsBitExact) {
+    write_text(path("cube.ply"), cube_ply_ascii_quads());
+    auto s = read_mesh_samples(path("cube.ply"), 0.5);
+    ASSERT_TRUE(s) << s.error().message;
+    hotgauge::match::ModelConfig config;
+    config.sampling_mm = 2.0;
+    auto m =
+        hotgauge::match::model_from_samples("cube", "mesh cube.ply", s->points, s->normals, config);
+    ASSERT_TRUE(m) << m.error().message;
+    ASSERT_FALSE(m->dense_points.empty());
+    ASSERT_TRUE(write_model(*m, path("cube.hgm")));
+    auto back = read_model(path("cube.hgm"));
+    ASSERT_TRUE(back) << back.error().message;
+    expect_same_model(*m, *back);
+}
+
+TEST_F(ModelFile, RefusesToWriteAnInvalidModel) {
+    Model m = recipe_model();
+    m.refs.push_back(static_cast<std::uint32_t>(m.points.size()));
+    auto w = write_model(m, path("bad.hgm"));
+    ASSERT_FALSE(w);
+    EXPECT_NE(w.error().message.find("bad.hgm"), std::string::npos) << w.error().message;
+    EXPECT_FALSE(fs::exists(path("bad.hgm")));
+    EXPECT_FALSE(fs::exists(path("bad.hgm.tmp")));
+}
+
+TEST_F(ModelFile, EveryBadFileIsAClearError) {
+    const Model m = recipe_model();
+    const fs::path good = path("good.hgm");
+    ASSERT_TRUE(write_model(m, good));
+    const Bytes bytes = read_all(good);
+    const fs::path p = path("bad.hgm");
+    auto error_for = [&](const Bytes& b) {
+        write_all(p, b);
+        const std::string msg = error_of(read_model(p));
+        EXPECT_EQ(msg.rfind(p.string() + ": ", 0), 0u) << "does not name the file: " << msg;
+        return msg;
+    };
+    auto has = [](const std::string& msg, const char* what) {
+        return msg.find(what) != std::string::npos;
+    };
+
+    EXPECT_TRUE(has(error_of(read_model(path("none.hgm"))), "no such file"));
+    EXPECT_TRUE(has(error_for({}), "empty file"));
+
+    Bytes b = bytes;
+    b[b.size() / 2] ^= 0x10;
+    EXPECT_TRUE(has(error_for(b), "corrupt: checksum mismatch"));
+
+    b = bytes;
+    b[8] = 2;
+    const std::string version = error_for(b);
+    EXPECT_TRUE(has(version, "model format version 2, this build reads 1")) << version;
+    EXPECT_TRUE(has(version, "hotgauge model build")) << version;
+
+    // Text-mode transfer: "\r\n" in the magic became "\n".
+    b = bytes;
+    b.erase(b.begin() + 6);
+    EXPECT_TRUE(has(error_for(b), "not a hotgauge model file"));
+
+    for (std::size_t len :
+         {std::size_t{1}, std::size_t{5}, std::size_t{8}, std::size_t{11}, std::size_t{12},
+          std::size_t{19}, std::size_t{20}, std::size_t{21}, std::size_t{100}, bytes.size() / 3,
+          bytes.size() - 9, bytes.size() - 8, bytes.size() - 1}) {
+        const std::string msg = error_for(Bytes(bytes.begin(), bytes.begin() + len));
+        EXPECT_TRUE(has(msg, "truncated")) << len << ": " << msg;
+    }
+    b = bytes;
+    b.push_back(0);
+    EXPECT_TRUE(has(error_for(b), "unexpected bytes after the checksum"));
+
+    // A count far larger than the file, with a valid checksum: an error, not an allocation.
+    b = bytes;
+    put_le(b, 20, std::uint64_t{1} << 60, 8);  // length of the name
+    reseal(b);
+    const std::string count = error_for(b);
+    EXPECT_TRUE(has(count, "name: count 1152921504606846976 needs more than")) << count;
+
+    // A well-formed file of an invalid model (a reference beyond the samples): validate() says.
+    b = bytes;
+    put_le(b, refs_offset(m), 0xfffffff0u, 4);
+    reseal(b);
+    const std::string invalid = error_for(b);
+    EXPECT_TRUE(has(invalid, "invalid model: model: a reference index is out of range")) << invalid;
+
+    // Random garbage, with and without the magic in front.
+    std::mt19937 rng(5);
+    for (std::size_t len : {1u, 7u, 20u, 64u, 4096u}) {
+        Bytes g(len);
+        for (auto& c : g) c = static_cast<unsigned char>(rng());
+        EXPECT_TRUE(has(error_for(g), "not a hotgauge model file")) << len;
+        Bytes with_magic(bytes.begin(), bytes.begin() + 12);
+        with_magic.insert(with_magic.end(), g.begin(), g.end());
+        EXPECT_FALSE(error_for(with_magic).empty()) << len;
+    }
+}
+
+// Random edits of the body behind a recomputed checksum: whatever the reader makes of them, it
+// returns (a model that passes validate(), or an error naming the file) and never crashes.
+TEST_F(ModelFile, ResealedRandomEditsNeverCrash) {
+    const Model m = recipe_model(15.0);  // a small file: many trials in little time
+    ASSERT_TRUE(write_model(m, path("good.hgm")));
+    const Bytes bytes = read_all(path("good.hgm"));
+    const fs::path p = path("edit.hgm");
+    std::mt19937 rng(11);
+    int rejected = 0;
+    for (int trial = 0; trial < 120; ++trial) {
+        Bytes b = bytes;
+        // Mostly in the first kilobyte, where the counts are.
+        const std::size_t span = trial % 2 ? 1024 : b.size() - 28;
+        for (int k = 0; k < 1 + trial % 3; ++k)
+            b[20 + rng() % span] = static_cast<unsigned char>(rng());
+        reseal(b);
+        write_all(p, b);
+        auto r = read_model(p);
+        if (r) {
+            EXPECT_TRUE(r->validate());
+        } else {
+            ++rejected;
+            EXPECT_EQ(r.error().message.rfind(p.string() + ": ", 0), 0u) << r.error().message;
+        }
+    }
+    EXPECT_GT(rejected, 0);
+}
+
+// ---- meshes ----
+
+using MeshFile = TempDir;
+
+TEST_F(MeshFile, CubeInEveryFormat) {
+    write_text(path("ascii_quads.ply"), cube_ply_ascii_quads());
+    write_all(path("binary.ply"), cube_ply_binary());
+    write_text(path("ascii.stl"), cube_stl_ascii());
+    write_all(path("binary.stl"), cube_stl_binary());
+    for (const char* name : {"ascii_quads.ply", "binary.ply", "ascii.stl", "binary.stl"}) {
+        SCOPED_TRACE(name);
+        for (double spacing : {0.5, 1.0}) {
+            auto s = read_mesh_samples(path(name), spacing);
+            ASSERT_TRUE(s) << s.error().message;
+            expect_cube_samples(*s, spacing);
+        }
+    }
+    // Fixed seed: the same file gives the same samples.
+    auto a = read_mesh_samples(path("binary.stl"), 0.5),
+         b = read_mesh_samples(path("binary.stl"), 0.5);
+    ASSERT_TRUE(a && b);
+    EXPECT_EQ(a->points, b->points);
+}
+
+TEST_F(MeshFile, DegenerateTrianglesAreSkipped) {
+    std::string ply = cube_ply_ascii_quads();
+    // Two more faces: a repeated vertex and three collinear vertices (0, 1 and 0 again).
+    ply.replace(ply.find("element face 6"), 14, "element face 8");
+    ply += "3 0 0 5\n3 0 1 0\n";
+    write_text(path("cube.ply"), ply);
+    auto s = read_mesh_samples(path("cube.ply"), 0.5);
+    ASSERT_TRUE(s) << s.error().message;
+    expect_cube_samples(*s, 0.5);
+}
+
+TEST_F(MeshFile, Errors) {
+    auto error = [&](const std::string& name, const Bytes& content) {
+        write_all(path(name), content);
+        auto s = read_mesh_samples(path(name), 0.5);
+        EXPECT_FALSE(s) << name << " accepted";
+        const std::string msg = s ? "" : s.error().message;
+        EXPECT_EQ(msg.rfind(path(name).string() + ": ", 0), 0u) << msg;
+        return msg;
+    };
+    auto text = [](const std::string& t) { return Bytes(t.begin(), t.end()); };
+    auto has = [](const std::string& msg, const char* what) {
+        return msg.find(what) != std::string::npos;
+    };
+    auto replaced = [](std::string t, const std::string& from, const std::string& to) {
+        t.replace(t.find(from), from.size(), to);
+        return t;
+    };
+    const std::string ply = cube_ply_ascii_quads();
+
+    auto missing = read_mesh_samples(path("none.stl"), 0.5);
+    ASSERT_FALSE(missing);
+    EXPECT_TRUE(has(missing.error().message, "none.stl: no such file"));
+    EXPECT_TRUE(has(error("cube.obj", text(ply)), "expected a mesh file .ply or .stl"));
+    EXPECT_TRUE(has(error("empty.ply", {}), "no end_header"));
+    EXPECT_TRUE(has(error("notply.ply", text("solid x\n" + ply)), "not a PLY file"));
+    EXPECT_TRUE(has(error("be.ply", text(replaced(ply, "ascii", "binary_big_endian"))),
+                    "binary_big_endian' is not supported"));
+    EXPECT_TRUE(has(error("noend.ply", text(replaced(ply, "end_header", "end_heade"))),
+                    "unknown keyword 'end_heade'"));
+    EXPECT_TRUE(has(error("range.ply", text(replaced(ply, "4 1 3 7 5", "4 1 3 8 5"))),
+                    "face 5: vertex index 8 out of range (8 vertices)"));
+    EXPECT_TRUE(
+        has(error("neg.ply", text(replaced(ply, "4 1 3 7 5", "4 1 3 -1 5"))), "out of range"));
+    EXPECT_TRUE(
+        has(error("nan.ply", text(replaced(ply, "4 1 3 7 5", "4 1 3 x 5"))), "not a number: 'x'"));
+    EXPECT_TRUE(has(error("short.ply", text(ply.substr(0, ply.size() - 12))), "truncated"));
+    EXPECT_TRUE(has(error("noface.ply", text(replaced(ply, "element face 6", "element face 0"))),
+                    "no triangles"));
+    EXPECT_TRUE(
+        has(error("flat.ply", text(replaced(replaced(ply, "element face 6", "element face 1"),
+                                            "4 0 2 3 1", "3 0 1 0"))),
+            "no triangles with an area"));
+    const Bytes bin = cube_ply_binary();
+    for (std::size_t cut : {std::size_t{1}, std::size_t{13}, std::size_t{100}})
+        EXPECT_TRUE(has(error("cut.ply", Bytes(bin.begin(), bin.end() - cut)), "truncated"));
+    Bytes huge_list = bin;  // the first face's count becomes 2^31 - 1
+    const std::size_t first_face = bin.size() - 12 * 20;
+    put_le(huge_list, first_face, 0x7fffffff, 4);
+    EXPECT_TRUE(has(error("list.ply", huge_list), "truncated"));
+
+    const std::string stl = cube_stl_ascii();
+    EXPECT_TRUE(has(error("noend.stl", text(stl.substr(0, stl.find("endsolid")))), "no endsolid"));
+    EXPECT_TRUE(has(error("typo.stl", text(replaced(stl, "outer loop", "outer lop"))),
+                    "expected 'outer loop'"));
+    EXPECT_TRUE(has(error("coord.stl", text(replaced(stl, "vertex 1", "vertex one"))),
+                    "expected 'vertex x y z' or 'endloop'"));
+    EXPECT_TRUE(has(error("empty.stl", text("solid nothing\nendsolid nothing\n")), "no triangles"));
+    const Bytes bstl = cube_stl_binary();
+    Bytes cut_stl(bstl.begin(), bstl.end() - 50);
+    cut_stl[0] = 'x';  // not "solid": only binary is possible
+    EXPECT_TRUE(has(error("cut.stl", cut_stl), "truncated: binary STL of 12 triangles"));
+    EXPECT_TRUE(has(error("tiny.stl", text("abc")), "not an STL file"));
+    auto bad_spacing = read_mesh_samples(path("noend.stl"), 0.0);
+    ASSERT_FALSE(bad_spacing);
+    EXPECT_TRUE(has(bad_spacing.error().message, "spacing"));
+}
+
+// ---- scans ----
+
+using ScanFile = TempDir;
+
+namespace {
+
+// A 30 × 30 grid with 1 mm pitch on the plane z = z0 + slope·x, small deterministic jitter in
+// x and y so that the grid is not perfectly regular.
+std::vector<Eigen::Vector3f> plane_points(double slope) {
+    std::vector<Eigen::Vector3f> pts;
+    std::mt19937 rng(3);
+    for (int i = 0; i < 30; ++i)
+        for (int j = 0; j < 30; ++j) {
+            const double x = i + 0.1 * (static_cast<double>(rng() % 1000) / 1000 - 0.5);
+            const double y = j + 0.1 * (static_cast<double>(rng() % 1000) / 1000 - 0.5);
+            pts.emplace_back(static_cast<float>(x), static_cast<float>(y),
+                             static_cast<float>(5.0 + slope * x));
+        }
+    return pts;
+}
+
+std::string pcd_header(const std::string& fields, const std::string& size, const std::string& type,
+                       const std::string& count, std::size_t n, const std::string& data) {
+    std::ostringstream s;
+    s << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS " << fields << "\nSIZE "
+      << size << "\nTYPE " << type << "\nCOUNT " << count << "\nWIDTH " << n
+      << "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " << n << "\nDATA " << data << "\n";
+    return s.str();
+}
+
+void expect_normals(const SurfaceSamples& s, const Eigen::Vector3f& expected, std::size_t n) {
+    ASSERT_EQ(s.points.size(), n);
+    ASSERT_EQ(s.normals.size(), n);
+    for (std::size_t i = 0; i < n; ++i)
+        ASSERT_LT((s.normals[i] - expected).norm(), 1e-4) << i << ": " << s.normals[i].transpose();
+}
+
+}  // namespace
+
+TEST_F(ScanFile, PlaneWithoutNormalsGetsUpwardPcaNormals) {
+    const auto flat = plane_points(0.0);
+    const std::size_t n = flat.size();
+    // ascii PCD with an extra field, binary PCD with an rgb field between, binary PLY.
+    std::ostringstream ascii;
+    ascii << pcd_header("x y z intensity", "4 4 4 4", "F F F F", "1 1 1 1", n + 1, "ascii");
+    for (const auto& p : flat) ascii << p.x() << ' ' << p.y() << ' ' << p.z() << " 7\n";
+    ascii << "nan nan nan 0\n";  // an invalid point, as organised clouds have: dropped
+    write_text(path("ascii.pcd"), ascii.str());
+
+    const std::string h = pcd_header("x rgb y z", "4 4 8 4", "F U F F", "1 1 1 1", n, "binary");
+    Bytes bin(h.begin(), h.end());
+    for (const auto& p : flat) {
+        append(bin, p.x());
+        append(bin, std::uint32_t{0xff0000});
+        append(bin, static_cast<double>(p.y()));
+        append(bin, p.z());
+    }
+    write_all(path("binary.pcd"), bin);
+
+    const std::string ph = "ply\nformat binary_little_endian 1.0\nelement vertex " +
+                           std::to_string(n) +
+                           "\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+    Bytes ply(ph.begin(), ph.end());
+    for (const auto& p : flat) {
+        append(ply, p.x());
+        append(ply, p.y());
+        append(ply, p.z());
+    }
+    write_all(path("scan.ply"), ply);
+
+    for (const char* name : {"ascii.pcd", "binary.pcd", "scan.ply"}) {
+        SCOPED_TRACE(name);
+        auto s = read_scan_samples(path(name));
+        ASSERT_TRUE(s) << s.error().message;
+        expect_normals(*s, Eigen::Vector3f::UnitZ(), n);
+        EXPECT_EQ(s->points[0], flat[0]);
+    }
+}
+
+TEST_F(ScanFile, TiltedPlaneNormalsAndNormalsFromTheFile) {
+    // A plane falling towards +x: PCA gives (0.5, 0, 1)/|…|, oriented towards +z.
+    const auto tilted = plane_points(-0.5);
+    std::ostringstream ascii;
+    ascii << pcd_header("x y z", "4 4 4", "F F F", "1 1 1", tilted.size(), "ascii");
+    for (const auto& p : tilted) ascii << p.x() << ' ' << p.y() << ' ' << p.z() << '\n';
+    write_text(path("tilted.pcd"), ascii.str());
+    auto s = read_scan_samples(path("tilted.pcd"));
+    ASSERT_TRUE(s) << s.error().message;
+    expect_normals(*s, Eigen::Vector3f(0.5f, 0, 1).normalized(), tilted.size());
+
+    // Normals in the file are used as they are (normalised), even pointing down.
+    std::ostringstream with;
+    with << pcd_header("x y z normal_x normal_y normal_z curvature", "4 4 4 4 4 4 4",
+                       "F F F F F F F", "1 1 1 1 1 1 1", tilted.size(), "ascii");
+    for (const auto& p : tilted) with << p.x() << ' ' << p.y() << ' ' << p.z() << " 0 0 -2 0\n";
+    write_text(path("normals.pcd"), with.str());
+    s = read_scan_samples(path("normals.pcd"));
+    ASSERT_TRUE(s) << s.error().message;
+    expect_normals(*s, -Eigen::Vector3f::UnitZ(), tilted.size());
+
+    std::ostringstream ply;
+    ply << "ply\nformat ascii 1.0\nelement vertex " << tilted.size()
+        << "\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\n"
+           "property float ny\nproperty float nz\nend_header\n";
+    for (const auto& p : tilted) ply << p.x() << ' ' << p.y() << ' ' << p.z() << " 1 0 0\n";
+    write_text(path("normals.ply"), ply.str());
+    s = read_scan_samples(path("normals.ply"));
+    ASSERT_TRUE(s) << s.error().message;
+    expect_normals(*s, Eigen::Vector3f::UnitX(), tilted.size());
+}
+
+TEST_F(ScanFile, Errors) {
+    auto error = [&](const std::string& name, const std::string& content) {
+        write_text(path(name), content);
+        auto s = read_scan_samples(path(name));
+        EXPECT_FALSE(s) << name << " accepted";
+        const std::string msg = s ? "" : s.error().message;
+        EXPECT_EQ(msg.rfind(path(name).string() + ": ", 0), 0u) << msg;
+        return msg;
+    };
+    auto has = [](const std::string& msg, const char* what) {
+        return msg.find(what) != std::string::npos;
+    };
+    const std::string xyz = pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 100, "binary");
+    EXPECT_TRUE(has(error("scan.xyz", xyz), "expected a scan file .ply or .pcd"));
+    EXPECT_TRUE(has(error("cut.pcd", xyz + std::string(100 * 12 - 1, '\0')), "truncated"));
+    EXPECT_TRUE(has(
+        error("cut2.pcd", pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 100, "ascii") + "1 2 3\n"),
+        "truncated"));
+    EXPECT_TRUE(has(
+        error("zip.pcd", pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 100, "binary_compressed")),
+        "binary_compressed is not supported"));
+    EXPECT_TRUE(has(error("noz.pcd", pcd_header("x y w", "4 4 4", "F F F", "1 1 1", 0, "ascii")),
+                    "no x, y, z fields"));
+    EXPECT_TRUE(has(error("half.pcd", pcd_header("x y z normal_x", "4 4 4 4", "F F F F", "1 1 1 1",
+                                                 0, "ascii")),
+                    "some of normal_x"));
+    EXPECT_TRUE(has(error("type.pcd", pcd_header("x y z", "4 4 3", "F F F", "1 1 1", 0, "ascii")),
+                    "field 'z' has an unsupported SIZE/TYPE/COUNT"));
+    EXPECT_TRUE(has(error("nodata.pcd", "VERSION 0.7\nFIELDS x y z\n"), "no DATA line"));
+    EXPECT_TRUE(has(error("garbage.pcd", "\x01\x02 hello\n"), "not a PCD file"));
+    EXPECT_TRUE(has(error("two.pcd", pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 2, "ascii") +
+                                         "0 0 0\n1 1 1\n"),
+                    "2 valid points of 2"));
+    EXPECT_TRUE(has(error(
+                        "line.pcd", pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 20, "ascii") +
+                                        [] {
+                                            std::string s;
+                                            for (int i = 0; i < 20; ++i)
+                                                s += std::to_string(i) + " 0 0\n";
+                                            return s;
+                                        }()),
+                    "on a line"));
+    EXPECT_TRUE(has(error("nov.ply", "ply\nformat ascii 1.0\nelement face 0\nend_header\n"),
+                    "no vertex element"));
+}
