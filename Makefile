@@ -54,7 +54,9 @@ test: build build-asan
 	cd $(BUILD_ASAN) && ctest --output-on-failure -j $(JOBS) -L unit
 
 bench: build
+	cmake --build $(BUILD) -j $(JOBS) --target hotgauge_bench_match
 	$(BUILD)/tests/bench/hotgauge_bench
+	$(BUILD)/tests/bench/hotgauge_bench_match
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')

@@ -334,9 +334,11 @@ TEST(Match, GeneralModelFromSamples) {
             const int m = std::max(1, static_cast<int>(2 * M_PI * r / 0.7));
             for (int a = 0; a < m; ++a) {
                 const double phi = 2 * M_PI * a / m;
-                pts.push_back(Eigen::Vector3d(r * std::cos(phi), r * std::sin(phi), z).cast<float>());
-                nrm.push_back((seg.cylinder ? Eigen::Vector3d(sign * std::cos(phi), sign * std::sin(phi), 0)
-                                            : Eigen::Vector3d(0, 0, sign))
+                pts.push_back(
+                    Eigen::Vector3d(r * std::cos(phi), r * std::sin(phi), z).cast<float>());
+                nrm.push_back((seg.cylinder
+                                   ? Eigen::Vector3d(sign * std::cos(phi), sign * std::sin(phi), 0)
+                                   : Eigen::Vector3d(0, 0, sign))
                                   .cast<float>());
             }
         }

@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
     add(hotgauge::app::add_table1);
     add(hotgauge::app::add_fit);
     add(hotgauge::app::add_model);
+    add(hotgauge::app::add_grab);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

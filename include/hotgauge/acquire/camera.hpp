@@ -1,0 +1,79 @@
+#pragma once
+// A GigE Vision (or USB3 Vision) camera through Aravis 0.8 (docs/acquisition.md): open by id,
+// serial or IP, configure from plain settings plus a list of GenICam features, stream frames into
+// a buffer pool, and report every incomplete or missing buffer. The only file that includes
+// Aravis. Thread-safety: one thread uses a Camera; lost() may be read from any thread.
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "hotgauge/core/result.hpp"
+
+namespace hotgauge::acquire {
+
+struct CameraConfig {
+    std::string id;  // Aravis device id, serial number or IP address; "" = the first found
+    // GenICam features applied in order after the settings below ("ExposureAuto", "Off"), so a
+    // Photonfocus, an AT C6 or an area camera is configured without code.
+    std::vector<std::pair<std::string, std::string>> features;
+    int width = 0, height = 0, offset_x = 0, offset_y = 0;  // region; 0 = as the camera has it
+    std::string pixel_format;                               // "Mono8", "Mono16"; "" = as is
+    double frame_rate_hz = 0;                               // free-run rate; 0 = as is
+    double exposure_us = 0;                                 // 0 = as is
+    std::string trigger = "free";  // free (internal rate) | software | external (TriggerSource)
+    std::string trigger_source = "Line1";
+    int packet_size = 0;  // GigE Vision packet size, bytes; 0 = negotiated by Aravis
+    bool packet_resend = true;
+    int n_buffers = 16;     // buffer pool
+    int timeout_ms = 1000;  // no frame for this long while streaming: a timeout
+    int max_timeouts = 3;   // consecutive timeouts before the camera counts as lost
+};
+
+// What the stream delivered; never silently zero-filled.
+struct StreamStats {
+    std::int64_t frames = 0;      // complete buffers handed out
+    std::int64_t incomplete = 0;  // buffers with missing packets or another error status
+    std::int64_t timeouts = 0;    // waits that saw no buffer
+    std::uint64_t completed = 0, failures = 0, underruns = 0;  // Aravis stream statistics
+};
+
+// One received buffer, copied out of the pool.
+struct Frame {
+    std::int64_t camera_ns = 0;  // the camera's timestamp
+    std::int64_t system_ns = 0;  // host clock (CLOCK_REALTIME) when the buffer arrived
+    std::uint64_t frame_id = 0;
+    int width = 0, height = 0;
+    int bytes_per_pixel = 1;
+    std::vector<std::uint8_t> data;  // width × height × bytes_per_pixel, row-major
+};
+
+class Camera {
+  public:
+    // Opens and configures the camera; the error names the device and the setting that failed.
+    static core::Result<std::unique_ptr<Camera>> open(const CameraConfig& config);
+    ~Camera();
+    Camera(const Camera&) = delete;
+    Camera& operator=(const Camera&) = delete;
+
+    core::Result<void> start();
+    void stop();
+    // The next complete frame, or an error: "timeout" (none within timeout_ms; counted) or
+    // "camera lost" (control lost, or max_timeouts in a row). Incomplete buffers are counted and
+    // skipped, never returned.
+    core::Result<Frame> next();
+    core::Result<void> software_trigger();
+    core::Result<void> set_exposure_us(double exposure_us);
+    bool lost() const;
+    const StreamStats& stats() const { return stats_; }
+    std::string description() const;  // vendor, model, serial, address
+
+  private:
+    struct Impl;
+    explicit Camera(std::unique_ptr<Impl> impl);
+    std::unique_ptr<Impl> impl_;
+    StreamStats stats_;
+};
+
+}  // namespace hotgauge::acquire

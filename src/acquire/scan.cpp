@@ -1,0 +1,103 @@
+#include "hotgauge/acquire/scan.hpp"
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+namespace hotgauge::acquire {
+
+ScanBuilder::ScanBuilder(ScanConfig config, Triangulation triangulation)
+    : config_(std::move(config)), triangulation_(std::move(triangulation)) {
+    face_.name = config_.face;
+    face_.T_world_camera = config_.T_world_camera;
+    face_.scan_direction = config_.scan_direction.normalized();
+    face_.R_camera_accel = config_.R_camera_accel;
+}
+
+void ScanBuilder::refuse(const std::string& why) {
+    ++stats_.refused_frames;
+    stats_.last_refusal = why;
+}
+
+void ScanBuilder::add_profile(const std::vector<StripePoint>& points, std::size_t first, int width,
+                              std::int64_t t_ns) {
+    if (face_.profile_times_ns.empty()) t_first_ns_ = t_ns;
+    const std::span<const StripePoint> profile(points.data() + first,
+                                               static_cast<std::size_t>(width));
+    for (const auto& p : profile) switch (p.status) {
+            case StripeStatus::kOk:
+                ++stats_.ok;
+                break;
+            case StripeStatus::kNoReturn:
+                ++stats_.no_return;
+                break;
+            case StripeStatus::kDark:
+                ++stats_.dark;
+                break;
+            case StripeStatus::kSaturated:
+                ++stats_.saturated;
+                break;
+            case StripeStatus::kDoublePeak:
+                ++stats_.double_peak;
+                break;
+        }
+    triangulate(triangulation_, profile, face_.profiles_mm, config_.offset_x_px,
+                config_.offset_y_px);
+    face_.profile_times_ns.push_back(t_ns);
+    face_.profile_positions_mm.push_back(config_.speed_mm_s *
+                                         static_cast<double>(t_ns - t_first_ns_) * 1e-9);
+    ++stats_.profiles;
+}
+
+void ScanBuilder::add(const Frame& f) {
+    ++stats_.frames;
+    if (face_.width == 0) face_.width = f.width;
+    if (f.width != face_.width) {
+        refuse("frame width " + std::to_string(f.width) + " differs from the scan's " +
+               std::to_string(face_.width));
+        return;
+    }
+    const std::int64_t t0 = f.camera_ns + config_.clock_offset_ns;
+    const bool peaks = config_.frame_mode == "peaks";
+    const int n = peaks ? config_.peaks.profiles_per_frame : 1;
+    const auto period_ns = static_cast<std::int64_t>(std::llround(config_.line_period_s * 1e9));
+    if (!face_.profile_times_ns.empty() && t0 <= face_.profile_times_ns.back()) {
+        refuse("timestamp " + std::to_string(t0) + " ns does not follow the previous profile");
+        return;
+    }
+    std::vector<StripePoint> points;
+    if (peaks) {
+        if (f.bytes_per_pixel != 2 || f.height < config_.peaks.frame_rows()) {
+            refuse("peaks frame is not Mono16 with " + std::to_string(config_.peaks.frame_rows()) +
+                   " rows");
+            return;
+        }
+        std::vector<std::uint16_t> words(f.data.size() / 2);
+        std::memcpy(words.data(), f.data.data(), words.size() * 2);
+        points = decode_peaks(words.data(), f.width, config_.peaks);
+    } else if (f.bytes_per_pixel == 1) {
+        points = extract_stripe(f.data.data(), f.width, f.height, f.width, config_.stripe);
+    } else if (f.bytes_per_pixel == 2) {
+        std::vector<std::uint16_t> words(f.data.size() / 2);
+        std::memcpy(words.data(), f.data.data(), words.size() * 2);
+        points = extract_stripe(words.data(), f.width, f.height, f.width, config_.stripe);
+    } else {
+        refuse("unsupported pixel size " + std::to_string(f.bytes_per_pixel) + " bytes");
+        return;
+    }
+    for (int k = 0; k < n; ++k)
+        add_profile(points, static_cast<std::size_t>(k) * static_cast<std::size_t>(f.width),
+                    f.width, t0 + k * period_ns);
+}
+
+core::FaceScan ScanBuilder::take() {
+    core::FaceScan out = std::move(face_);
+    face_ = {};
+    face_.name = config_.face;
+    face_.T_world_camera = config_.T_world_camera;
+    face_.scan_direction = config_.scan_direction.normalized();
+    face_.R_camera_accel = config_.R_camera_accel;
+    return out;
+}
+
+}  // namespace hotgauge::acquire

@@ -1,0 +1,181 @@
+// hotgauge grab: one face from a live GigE Vision camera into a recording (format v1), with the
+// daemon's acquisition code (docs/acquisition.md). Commissioning and tests use it.
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <ctime>
+
+#include "commands.hpp"
+#include "hotgauge/acquire/camera.hpp"
+#include "hotgauge/acquire/scan.hpp"
+#include "hotgauge/io/recording_io.hpp"
+#include "hotgauge/sim/simulator.hpp"
+
+namespace hotgauge::app {
+namespace {
+
+struct GrabArgs {
+    acquire::CameraConfig camera;
+    acquire::ScanConfig scan;
+    std::vector<std::string> features;  // NAME=VALUE
+    std::string cell = HOTGAUGE_CONFIG_DIR "/cell.yaml";
+    std::string out;
+    std::string recipe = "hub-a";
+    std::string part_id = "GRAB-000001";
+    std::optional<double> temperature_c;
+    double seconds = 1.0;
+    int fractional_bits = 6;
+};
+
+std::string now_iso8601() {
+    const std::time_t t = std::time(nullptr);
+    std::tm tm{};
+    gmtime_r(&t, &tm);
+    char buf[32];
+    std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+    return buf;
+}
+
+int run(GrabArgs a) {
+    for (const auto& f : a.features) {
+        const auto eq = f.find('=');
+        if (eq == std::string::npos || eq == 0) {
+            spdlog::error("--feature '{}': expected NAME=VALUE", f);
+            return 2;
+        }
+        a.camera.features.emplace_back(f.substr(0, eq), f.substr(eq + 1));
+    }
+    // The face's geometry (camera pose, scan direction, accelerometer axes) from the cell config.
+    auto cell = sim::read_cell_config(a.cell);
+    if (!cell) {
+        spdlog::error("{}", cell.error().message);
+        return 1;
+    }
+    const sim::FaceConfig* face = nullptr;
+    for (const auto& f : cell->faces)
+        if (f.name == a.scan.face) face = &f;
+    if (!face) {
+        spdlog::error("{}: no face '{}'", a.cell, a.scan.face);
+        return 1;
+    }
+    a.scan.T_world_camera = face->T_world_camera;
+    a.scan.scan_direction = face->scan_direction;
+    a.scan.R_camera_accel = face->R_camera_accel;
+    a.scan.peaks.fractional_bits = a.fractional_bits;
+    if (a.scan.frame_mode == "peaks") {
+        if (auto ok = acquire::check_peak_format(a.scan.peaks); !ok) {
+            spdlog::error("{}", ok.error().message);
+            return 1;
+        }
+    } else if (auto ok = acquire::check_stripe_config(a.scan.stripe); !ok) {
+        spdlog::error("{}", ok.error().message);
+        return 1;
+    }
+    auto beam = acquire::design_direct_beam({});
+    if (!beam) {
+        spdlog::error("{}", beam.error().message);
+        return 1;
+    }
+    auto tri = acquire::Triangulation::direct_beam(*beam);
+    if (!tri) {
+        spdlog::error("{}", tri.error().message);
+        return 1;
+    }
+    a.scan.offset_x_px = a.camera.offset_x;
+    a.scan.offset_y_px = a.camera.offset_y;
+
+    auto cam = acquire::Camera::open(a.camera);
+    if (!cam) {
+        spdlog::error("{}", cam.error().message);
+        return 1;
+    }
+    spdlog::info("grabbing {} s from {}", a.seconds, (*cam)->description());
+    acquire::ScanBuilder builder(a.scan, *tri);
+    if (auto ok = (*cam)->start(); !ok) {
+        spdlog::error("{}", ok.error().message);
+        return 1;
+    }
+    const auto t_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(a.seconds);
+    while (std::chrono::steady_clock::now() < t_end) {
+        auto frame = (*cam)->next();
+        if (frame) {
+            builder.add(*frame);
+            continue;
+        }
+        if ((*cam)->lost()) {
+            (*cam)->stop();
+            spdlog::error("scan failed after {} frames: {}", builder.stats().frames,
+                          frame.error().message);
+            return 1;
+        }
+        spdlog::warn("{}", frame.error().message);
+    }
+    (*cam)->stop();
+    const auto& st = builder.stats();
+    const auto& cs = (*cam)->stats();
+    core::Recording rec;
+    rec.part_id = a.part_id;
+    rec.recipe = a.recipe;
+    rec.captured_at = now_iso8601();
+    rec.temperature_c = a.temperature_c;
+    rec.faces.push_back(builder.take());
+    if (rec.faces[0].n_profiles() == 0) {
+        spdlog::error("scan failed: no frame arrived in {} s ({} timeouts, {} incomplete)",
+                      a.seconds, cs.timeouts, cs.incomplete);
+        return 1;
+    }
+    if (auto ok = io::write_recording(rec, a.out); !ok) {
+        spdlog::error("{}", ok.error().message);
+        return 1;
+    }
+    const auto& times = rec.faces[0].profile_times_ns;
+    std::printf(
+        "grabbed %s: %lld frames (%lld incomplete, %lld timeouts, %lld refused), %lld profiles "
+        "over %.3f s; points: %lld ok, %lld no return, %lld dark, %lld saturated, %lld double "
+        "peak; no accelerometer (K = 0) -> %s\n",
+        a.scan.face.c_str(), static_cast<long long>(st.frames),
+        static_cast<long long>(cs.incomplete), static_cast<long long>(cs.timeouts),
+        static_cast<long long>(st.refused_frames), static_cast<long long>(st.profiles),
+        static_cast<double>(times.back() - times.front()) * 1e-9, static_cast<long long>(st.ok),
+        static_cast<long long>(st.no_return), static_cast<long long>(st.dark),
+        static_cast<long long>(st.saturated), static_cast<long long>(st.double_peak),
+        a.out.c_str());
+    return 0;
+}
+
+}  // namespace
+
+Command add_grab(CLI::App& app) {
+    auto a = std::make_shared<GrabArgs>();
+    auto* s = app.add_subcommand("grab", "record one face from a live camera (GigE Vision)");
+    s->add_option("--camera", a->camera.id, "camera id, serial or IP (Aravis)")->required();
+    s->add_option("--seconds", a->seconds, "scan duration")->capture_default_str();
+    s->add_option("--out", a->out, "recording folder to write")->required();
+    s->add_option("--face", a->scan.face, "face name (geometry from the cell config)")
+        ->capture_default_str();
+    s->add_option("--cell", a->cell, "cell config with the face geometry")->capture_default_str();
+    s->add_option("--mode", a->scan.frame_mode, "frame mode")
+        ->check(CLI::IsMember({"image", "peaks"}))
+        ->capture_default_str();
+    s->add_option("--width", a->camera.width, "region width (0: as is)");
+    s->add_option("--height", a->camera.height, "region height (0: as is)");
+    s->add_option("--pixel-format", a->camera.pixel_format, "Mono8, Mono16 (default: as is)");
+    s->add_option("--frame-rate", a->camera.frame_rate_hz, "free-run frame rate, Hz");
+    s->add_option("--exposure-us", a->camera.exposure_us, "exposure time, µs");
+    s->add_option("--feature", a->features, "GenICam feature NAME=VALUE (repeatable, in order)");
+    s->add_option("--timeout-ms", a->camera.timeout_ms, "frame timeout")->capture_default_str();
+    s->add_option("--speed-mm-s", a->scan.speed_mm_s, "scan axis speed")->capture_default_str();
+    s->add_option("--max-value", a->scan.stripe.max_value, "image mode: full-scale pixel value")
+        ->capture_default_str();
+    s->add_option("--fractional-bits", a->fractional_bits, "peaks mode: fractional bits")
+        ->capture_default_str();
+    s->add_option("--profiles-per-frame", a->scan.peaks.profiles_per_frame,
+                  "peaks mode: profiles per frame")
+        ->capture_default_str();
+    s->add_option("--part-id", a->part_id, "part id for part.yaml")->capture_default_str();
+    s->add_option("--recipe", a->recipe, "recipe name for part.yaml")->capture_default_str();
+    s->add_option("--temperature", a->temperature_c, "part temperature, °C (default: unknown)");
+    return [a] { return run(*a); };
+}
+
+}  // namespace hotgauge::app
