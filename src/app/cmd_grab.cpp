@@ -96,21 +96,26 @@ int run(GrabArgs a) {
         return 1;
     }
     const auto t_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(a.seconds);
+    // A scan whose last wait saw no frame ended with the camera gone or stalled: it fails, as
+    // one that lost the camera earlier does; a part of a scan is never passed on as the scan.
+    std::string last_error;
     while (std::chrono::steady_clock::now() < t_end) {
         auto frame = (*cam)->next();
         if (frame) {
             builder.add(*frame);
+            last_error.clear();
             continue;
         }
-        if ((*cam)->lost()) {
-            (*cam)->stop();
-            spdlog::error("scan failed after {} frames: {}", builder.stats().frames,
-                          frame.error().message);
-            return 1;
-        }
-        spdlog::warn("{}", frame.error().message);
+        last_error = frame.error().message;
+        if ((*cam)->lost()) break;
+        spdlog::warn("{}", last_error);
     }
     (*cam)->stop();
+    if (!last_error.empty()) {
+        spdlog::error("scan failed after {} frames: camera lost or stalled: {}",
+                      builder.stats().frames, last_error);
+        return 1;
+    }
     const auto& st = builder.stats();
     const auto& cs = (*cam)->stats();
     core::Recording rec;
