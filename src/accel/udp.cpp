@@ -7,11 +7,12 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <bit>
 #include <cassert>
 #include <cerrno>
 #include <charconv>
-#include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <utility>
 

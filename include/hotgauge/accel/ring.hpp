@@ -76,8 +76,8 @@ struct AccelRingStats {
 
 // Thread safety: one writer (the source's thread calls push/note_loss) and any number of
 // readers (copy_range, stats, wait_for) at the same time; every member takes the one mutex, so
-// readers copy out and never see a half-written push. Two concurrent writers would still be
-// memory-safe but their samples would be dropped as non-monotonic, so sources do not share rings.
+// readers copy out and never see a half-written push. Two writers would be memory-safe but
+// interleave, and the one behind would lose its samples as non-monotonic: one ring per source.
 class AccelRing {
   public:
     explicit AccelRing(const AccelRingConfig& config = {});
