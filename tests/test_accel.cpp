@@ -30,6 +30,7 @@
 #include "hotgauge/accel/source.hpp"
 #include "hotgauge/accel/udp.hpp"
 #include "hotgauge/io/recording_io.hpp"
+#include "temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using namespace hotgauge::accel;
@@ -39,23 +40,7 @@ namespace {
 
 constexpr std::int64_t kMs = 1'000'000;
 
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        static std::atomic<int> counter{0};
-        const auto ticks = std::chrono::steady_clock::now().time_since_epoch().count();
-        path =
-            fs::temp_directory_path() / ("hotgauge-test-accel-" + std::to_string(::getpid()) + "-" +
-                                         std::to_string(ticks) + "-" + std::to_string(counter++));
-        fs::create_directories(path);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-    TempDir(const TempDir&) = delete;
-    TempDir& operator=(const TempDir&) = delete;
-};
+using hotgauge::test::TempDir;
 
 void write_text(const fs::path& p, const std::string& text) {
     fs::create_directories(p.parent_path());

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "hotgauge/io/npy.hpp"
+#include "temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using hotgauge::io::NpyArray;
@@ -30,24 +31,7 @@ const std::string kPython = HOTGAUGE_PYTHON;
 const std::string kPython = "/usr/bin/python3";
 #endif
 
-// A fresh directory under the system temp dir, removed with everything in it.
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        static std::atomic<int> counter{0};
-        const auto ticks = std::chrono::steady_clock::now().time_since_epoch().count();
-        path =
-            fs::temp_directory_path() / ("hotgauge-test-npy-" + std::to_string(::getpid()) + "-" +
-                                         std::to_string(ticks) + "-" + std::to_string(counter++));
-        fs::create_directories(path);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-    TempDir(const TempDir&) = delete;
-    TempDir& operator=(const TempDir&) = delete;
-};
+using hotgauge::test::TempDir;
 
 std::vector<unsigned char> slurp(const fs::path& p) {
     std::ifstream in(p, std::ios::binary);

@@ -19,6 +19,7 @@
 #include "hotgauge/io/npy.hpp"
 #include "hotgauge/io/ply.hpp"
 #include "hotgauge/io/recording_io.hpp"
+#include "temp_dir.hpp"
 
 namespace fs = std::filesystem;
 using hotgauge::core::FaceScan;
@@ -38,23 +39,7 @@ const std::string kPython = "/usr/bin/python3";
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        static std::atomic<int> counter{0};
-        const auto ticks = std::chrono::steady_clock::now().time_since_epoch().count();
-        path =
-            fs::temp_directory_path() / ("hotgauge-test-rec-" + std::to_string(::getpid()) + "-" +
-                                         std::to_string(ticks) + "-" + std::to_string(counter++));
-        fs::create_directories(path);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-    TempDir(const TempDir&) = delete;
-    TempDir& operator=(const TempDir&) = delete;
-};
+using hotgauge::test::TempDir;
 
 std::string slurp(const fs::path& p) {
     std::ifstream in(p, std::ios::binary);

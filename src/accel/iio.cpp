@@ -21,6 +21,7 @@
 #include <utility>
 
 #include "log.hpp"
+#include "worker.hpp"
 
 namespace fs = std::filesystem;
 
@@ -404,15 +405,7 @@ core::Result<void> IioAccelSource::start() {
 }
 
 void IioAccelSource::stop() {
-    if (thread_.joinable()) {
-        stop_ = true;
-        const std::uint64_t one = 1;
-        (void)!::write(wake_fd_, &one, sizeof one);
-        thread_.join();
-    }
-    if (fd_ >= 0) ::close(fd_);
-    if (wake_fd_ >= 0) ::close(wake_fd_);
-    fd_ = wake_fd_ = -1;
+    detail::stop_worker(thread_, stop_, wake_fd_, fd_);
     if (enabled_buffer_) {
         enabled_buffer_ = false;
         if (auto r = disable_iio_buffer(config_.device_dir); !r)

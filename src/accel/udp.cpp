@@ -17,6 +17,7 @@
 #include <utility>
 
 #include "log.hpp"
+#include "worker.hpp"
 
 namespace hotgauge::accel {
 
@@ -197,15 +198,7 @@ core::Result<void> UdpAccelReceiver::start() {
 }
 
 void UdpAccelReceiver::stop() {
-    if (thread_.joinable()) {
-        stop_ = true;
-        const std::uint64_t one = 1;
-        (void)!::write(wake_fd_, &one, sizeof one);
-        thread_.join();
-    }
-    if (fd_ >= 0) ::close(fd_);
-    if (wake_fd_ >= 0) ::close(wake_fd_);
-    fd_ = wake_fd_ = -1;
+    detail::stop_worker(thread_, stop_, wake_fd_, fd_);
     std::lock_guard lock(mutex_);
     if (state_ == AccelSourceState::running) state_ = AccelSourceState::stopped;
 }

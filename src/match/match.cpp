@@ -39,13 +39,19 @@ Eigen::Isometry3d from_ref_frames(const Eigen::Matrix<float, 3, 4>& Ts,
     return S.inverse() * Eigen::AngleAxisd(alpha, Eigen::Vector3d::UnitX()) * M;
 }
 
+// Every stride-th scene sample is a reference point: at most max_refs, evenly spread.
+std::size_t reference_stride(std::size_t n, int max_refs) {
+    const auto m = static_cast<std::size_t>(std::max(1, max_refs));
+    return std::max<std::size_t>(1, (n + m - 1) / m);
+}
+
 // Hough voting: per scene reference point, an accumulator over (model reference × α).
 std::vector<Candidate> vote(const Model& model, const detail::Samples& scene, int max_refs) {
     const int A = model.config.alpha_bins;
     const float bin = 2.0f * std::numbers::pi_v<float> / static_cast<float>(A);
     const float inv_bin = 1.0f / bin;
     const auto n = scene.points.size();
-    const std::size_t stride = std::max<std::size_t>(1, (n + max_refs - 1) / max_refs);
+    const std::size_t stride = reference_stride(n, max_refs);
     const float max_d2 = static_cast<float>(model.diameter_mm * model.diameter_mm);
     // Accumulator rows of 2A cells per model reference: a vote for α = α_m − α_s lands in cell
     // A + α_m − α_s (never wraps), and cells b and b + A are folded afterwards. Each entry's cell
@@ -221,10 +227,8 @@ MatchResult match(const Model& model, const core::Recording& rec, const FaceDisp
 
     const auto t1 = Clock::now();
     auto cands = vote(model, scene, cfg.max_reference_points);
-    res.reference_points = static_cast<std::int64_t>(
-        (scene.points.size() + cfg.max_reference_points - 1) /
-        std::max<std::size_t>(
-            1, (scene.points.size() + cfg.max_reference_points - 1) / cfg.max_reference_points));
+    const std::size_t stride = reference_stride(scene.points.size(), cfg.max_reference_points);
+    res.reference_points = static_cast<std::int64_t>((scene.points.size() + stride - 1) / stride);
     const double dist = cfg.cluster_distance_mm > 0 ? cfg.cluster_distance_mm : 2.0 * sampling;
     auto clusters = cluster(model, std::move(cands), cfg.cluster_angle_deg, dist);
     res.stage_ms.emplace_back("vote", ms_since(t1));
