@@ -1,5 +1,6 @@
 #include "hotgauge/sim/vibration.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -45,6 +46,11 @@ Vibration::Vibration(const VibrationConfig& config, double t_begin_s, double t_e
             b.amplitude_mm.push_back(m.amplitude_mm * std::max(0.0, scatter(rng)));
         blows_.push_back(std::move(b));
     }
+    // Past this, every mode's envelope is below the cutoff: evaluate() starts at the first blow
+    // younger than it (a virtual cell serves hours; its samples must not scan every blow).
+    for (const auto& m : config_.modes)
+        horizon_s_ = std::max(
+            horizon_s_, std::log(1.0 / kEnvelopeCutoff) / (m.damping_ratio * kTwoPi * m.freq_hz));
     // Ambient hum: sinusoids at random frequencies whose total RMS is ambient_rms_mm.
     constexpr int kHumLines = 24;
     std::uniform_real_distribution<double> f(2.0, 120.0), ph(0.0, kTwoPi);
@@ -58,7 +64,10 @@ Vibration::Vibration(const VibrationConfig& config, double t_begin_s, double t_e
 
 template <class J>
 void Vibration::evaluate(double t_s, J* out) const {
-    for (const auto& b : blows_) {
+    const auto first = std::partition_point(
+        blows_.begin(), blows_.end(), [&](const Blow& b) { return t_s - b.t_s > horizon_s_; });
+    for (auto it = first; it != blows_.end(); ++it) {
+        const Blow& b = *it;
         const double tau = t_s - b.t_s;
         if (tau <= 0.0) continue;
         // Smooth onset: (1 - e^{-τ/τ_on})² starts with zero displacement, velocity and

@@ -55,6 +55,7 @@ class Vibration {
     VibrationConfig config_;
     std::vector<Blow> blows_;
     std::vector<Hum> hum_;
+    double horizon_s_ = 0;  // blows older than this contribute nothing
 };
 
 }  // namespace hotgauge::sim

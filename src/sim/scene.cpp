@@ -1,0 +1,182 @@
+#include "hotgauge/sim/scene.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <optional>
+
+namespace hotgauge::sim {
+namespace {
+
+constexpr double kG = 9.81;  // m/s², as recording-format-v1 defines g_up
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+// Random as-forged part: every level (but the origin level) and diameter off nominal by N(0, σ).
+void draw_dimensions(const core::Recipe& recipe, double sigma, std::mt19937_64& rng,
+                     SimTruth& truth) {
+    std::normal_distribution<double> dev(0.0, sigma);
+    for (std::size_t i = 0; i < recipe.levels_mm.size(); ++i) {
+        const auto& [name, z] = recipe.levels_mm[i];
+        truth.levels_mm[name] = z == 0.0 ? 0.0 : z + dev(rng);
+    }
+    for (const auto* list : {&recipe.outer, &recipe.inner})
+        for (const auto& s : *list) truth.diameters_mm[s.name] = s.diameter_mm + dev(rng);
+    for (const auto& f : recipe.features) {
+        const double cold =
+            f.kind == core::FeatureKind::kDiameter
+                ? truth.diameters_mm.at(f.section)
+                : std::abs(truth.levels_mm.at(f.to_level) - truth.levels_mm.at(f.from_level));
+        truth.features.push_back({f.name, cold * truth.growth, cold});
+    }
+}
+
+Eigen::Isometry3d random_placement(const CellConfig& cell, double bottom_radius_mm,
+                                   std::mt19937_64& rng) {
+    std::uniform_real_distribution<double> u01(0.0, 1.0);
+    const double yaw = 2.0 * std::numbers::pi * u01(rng);
+    const double tilt = cell.placement.max_tilt_deg * kDeg * u01(rng);
+    const double tilt_dir = 2.0 * std::numbers::pi * u01(rng);
+    const double m = cell.placement.max_offset_mm;
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.rotate(Eigen::AngleAxisd(tilt, Eigen::Vector3d(std::cos(tilt_dir), std::sin(tilt_dir), 0)));
+    T.rotate(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()));
+    // Tilted on pins: lift so the lowest rim point just clears the support.
+    T.translation() = Eigen::Vector3d(m * (2 * u01(rng) - 1), m * (2 * u01(rng) - 1),
+                                      bottom_radius_mm * std::sin(tilt));
+    return T;
+}
+
+struct RayHit {
+    double t;
+    Eigen::Vector3d normal;
+};
+
+// First hit of a world ray on the part or (when visible) the support plate.
+std::optional<RayHit> cast(const core::AxisymmetricSolid& solid,
+                           const Eigen::Isometry3d& T_part_world, bool support, double support_half,
+                           const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_max) {
+    std::optional<RayHit> best;
+    const Eigen::Vector3d op = T_part_world * o, dp = T_part_world.linear() * d;
+    if (auto h = solid.intersect(op, dp, t_max))
+        best = RayHit{h->t, T_part_world.linear().transpose() * h->normal};
+    if (support && d.z() < 0.0 && o.z() > 0.0) {
+        const double t = -o.z() / d.z();
+        const Eigen::Vector3d p = o + t * d;
+        if (t < (best ? best->t : t_max) && std::abs(p.x()) <= support_half &&
+            std::abs(p.y()) <= support_half)
+            best = RayHit{t, Eigen::Vector3d::UnitZ()};
+    }
+    return best;
+}
+
+}  // namespace
+
+core::Result<Scene> Scene::create(const core::Recipe& recipe, const CellConfig& cell,
+                                  const SimOptions& opt, std::mt19937_64& rng) {
+    if (cell.sensor.width < 2) return core::make_error("cell config: sensor.width must be >= 2");
+    SimTruth truth;
+    truth.temperature_c = opt.temperature_c;
+    truth.growth = recipe.material.growth(opt.temperature_c);
+    truth.range_noise_mm = cell.sensor.range_noise_mm;
+    truth.support_half_size_mm = cell.support_half_size_mm;
+    draw_dimensions(recipe, opt.dimension_sigma_mm, rng, truth);
+    core::AxisymmetricSolid solid = truth.solid(recipe);
+    double bottom_radius = 0.0;
+    for (const auto& s : solid.boundary())
+        if (!s.cylinder && s.value <= 1e-9) bottom_radius = std::max(bottom_radius, s.hi);
+    truth.T_world_part =
+        opt.T_world_part ? *opt.T_world_part : random_placement(cell, bottom_radius, rng);
+    if (opt.occluded_fraction > 0) {
+        std::uniform_real_distribution<double> az(0.0, 2.0 * std::numbers::pi);
+        truth.occluded_from_rad = az(rng);
+        truth.occluded_rad = 2.0 * std::numbers::pi * std::min(1.0, opt.occluded_fraction);
+    }
+    return Scene(cell, std::move(truth), std::move(solid));
+}
+
+Scene::Scene(const CellConfig& cell, SimTruth truth, core::AxisymmetricSolid solid)
+    : cell_(cell),
+      truth_(std::move(truth)),
+      solid_(std::move(solid)),
+      T_part_world_(truth_.T_world_part.inverse()) {
+    const auto& s = cell_.sensor;
+    dir_cam_.resize(static_cast<std::size_t>(s.width));
+    for (int i = 0; i < s.width; ++i)
+        dir_cam_[i] = Eigen::Vector3d((i - 0.5 * (s.width - 1)) * s.pitch_mm, 0.0, s.standoff_mm)
+                          .normalized();
+}
+
+// Rays that hit the part inside the occluded sector return nothing.
+bool Scene::occluded(const Eigen::Vector3d& p_world) const {
+    if (truth_.occluded_rad <= 0) return false;
+    const Eigen::Vector3d q = T_part_world_ * p_world;
+    if (std::abs(solid_.distance(q)) > 1e-3) return false;  // the support, not the part
+    double a = std::atan2(q.y(), q.x()) - truth_.occluded_from_rad;
+    a -= 2.0 * std::numbers::pi * std::floor(a / (2.0 * std::numbers::pi));
+    return a < truth_.occluded_rad;
+}
+
+void Scene::cast_profile(const FaceConfig& fc, const Eigen::Vector3d& origin, RandomStream& rng,
+                         std::vector<RayReturn>& out, const ProfileEffects& effects) const {
+    const auto& s = cell_.sensor;
+    constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+    out.assign(static_cast<std::size_t>(s.width), RayReturn{kNaN, kNaN, 0.0f, false});
+    const double cos_max_incidence = std::cos(s.max_incidence_deg * kDeg);
+    const Eigen::Matrix3d R = fc.T_world_camera.linear();
+    const Eigen::Vector3d imager = origin + R * s.camera_center_mm;
+    for (int i = 0; i < s.width; ++i) {
+        const Eigen::Vector3d d = R * dir_cam_[i];
+        const auto hit = cast(solid_, T_part_world_, fc.support_visible, cell_.support_half_size_mm,
+                              origin, d, 1e4);
+        if (!hit) continue;
+        const Eigen::Vector3d p = origin + hit->t * d;
+        if (occluded(p)) continue;
+        const double range_z = hit->t * dir_cam_[i].z();
+        if (range_z < s.min_range_mm || range_z > s.max_range_mm) continue;
+        const double cos_incidence = std::abs(hit->normal.dot(d));
+        if (cos_incidence < cos_max_incidence) continue;
+        // Triangulation needs the imager to see the lit point.
+        const Eigen::Vector3d to_imager = imager - p;
+        const double dist = to_imager.norm();
+        if (hit->normal.dot(to_imager) * hit->normal.dot(-d) <= 0.0) continue;
+        if (cast(solid_, T_part_world_, false, 0.0, p + 1e-6 * to_imager / dist, to_imager / dist,
+                 dist))
+            continue;
+        if (effects.dropouts && rng.uniform() < s.dropout_fraction) continue;
+        double along = effects.range_noise ? s.range_noise_mm * rng.normal() : 0.0;
+        bool spike = false;
+        if (effects.spikes && rng.uniform() < s.spike_fraction) {
+            along = s.spike_range_mm * (2.0 * rng.uniform() - 1.0);
+            spike = true;
+        }
+        const double tm = hit->t + along;
+        out[i] = RayReturn{static_cast<float>(tm * dir_cam_[i].x()),
+                           static_cast<float>(tm * dir_cam_[i].z()),
+                           static_cast<float>(cos_incidence), spike};
+    }
+}
+
+AccelHead::AccelHead(const AccelConfig& a, const Eigen::Matrix3d& R_world_accel, RandomStream& rng)
+    : R_world_accel_(R_world_accel),
+      noise_mps2_(a.noise_density_ug * 1e-6 * kG * std::sqrt(a.rate_hz / 2.0)),
+      clip_mps2_(a.range_g * kG) {
+    // Three draws, z first: the order recordings made before this class existed have.
+    const double bz = a.bias_mps2 * (2 * rng.uniform() - 1);
+    const double by = a.bias_mps2 * (2 * rng.uniform() - 1);
+    const double bx = a.bias_mps2 * (2 * rng.uniform() - 1);
+    bias_mps2_ = Eigen::Vector3d(bx, by, bz);
+}
+
+Eigen::Vector3f AccelHead::sample(const Vibration& vibration, double t_s, RandomStream& rng) const {
+    const Eigen::Vector3d acc_world =
+        vibration.acceleration_mmps2(t_s) / 1000.0 + Eigen::Vector3d(0, 0, kG);
+    Eigen::Vector3d acc = R_world_accel_.transpose() * acc_world + bias_mps2_;
+    Eigen::Vector3f out;
+    for (int c = 0; c < 3; ++c)
+        out[c] = static_cast<float>(
+            std::clamp(acc[c] + noise_mps2_ * rng.normal(), -clip_mps2_, clip_mps2_));
+    return out;
+}
+
+}  // namespace hotgauge::sim
