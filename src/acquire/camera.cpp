@@ -163,6 +163,15 @@ core::Result<Frame> Camera::next() {
             impl_->stream, static_cast<guint64>(impl_->config.timeout_ms) * 1000u);
         arv_stream_get_statistics(impl_->stream, &stats_.completed, &stats_.failures,
                                   &stats_.underruns);
+        if (ARV_IS_GV_STREAM(impl_->stream)) {
+            auto info = [&](const char* name) {
+                return arv_stream_get_info_uint64_by_name(impl_->stream, name);
+            };
+            stats_.missing_frames = info("n_missing_frames");
+            stats_.missing_packets = info("n_missing_packets");
+            stats_.resend_requests = info("n_resend_requests");
+            stats_.resent_packets = info("n_resent_packets");
+        }
         if (!b) {
             ++stats_.timeouts;
             ++impl_->consecutive_timeouts;

@@ -234,7 +234,10 @@ ImagePoint Triangulation::to_image(double x_mm, double z_mm) const {
 void triangulate(const Triangulation& triangulation, std::span<const StripePoint> profile,
                  std::vector<float>& profiles_mm, double column_offset_px, double row_offset_px) {
     constexpr float kNaNf = std::numeric_limits<float>::quiet_NaN();
-    profiles_mm.reserve(profiles_mm.size() + 2 * profile.size());
+    // Grow geometrically: an exact reserve per profile would copy the whole scan every time.
+    if (profiles_mm.capacity() < profiles_mm.size() + 2 * profile.size())
+        profiles_mm.reserve(
+            std::max(2 * profiles_mm.capacity(), profiles_mm.size() + 2 * profile.size()));
     for (std::size_t i = 0; i < profile.size(); ++i) {
         if (profile[i].status != StripeStatus::kOk) {
             profiles_mm.push_back(kNaNf);

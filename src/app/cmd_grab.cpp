@@ -4,12 +4,17 @@
 
 #include <chrono>
 #include <ctime>
+#include <optional>
+#include <thread>
 
 #include "commands.hpp"
+#include "hotgauge/accel/ring.hpp"
+#include "hotgauge/accel/source.hpp"
 #include "hotgauge/acquire/camera.hpp"
 #include "hotgauge/acquire/scan.hpp"
 #include "hotgauge/io/recording_io.hpp"
 #include "hotgauge/sim/simulator.hpp"
+#include "hotgauge/vcell/render.hpp"
 
 namespace hotgauge::app {
 namespace {
@@ -25,7 +30,33 @@ struct GrabArgs {
     std::optional<double> temperature_c;
     double seconds = 1.0;
     int fractional_bits = 6;
+    int peak_row_offset = 0;
+    std::string accel;             // udp://HOST:PORT | iio:DEVICE_DIR[,BUFFER]; "" = none
+    double accel_margin_s = 0.75;  // accelerometer record before and after the scan
 };
+
+// --accel SOURCE → the accelerometer source config; the error names the option.
+core::Result<accel::AccelSourceConfig> parse_accel(const std::string& text) {
+    accel::AccelSourceConfig c;
+    if (text.rfind("udp://", 0) == 0) {
+        c.kind = accel::AccelSourceKind::udp;
+        c.udp.bind = text.substr(6);
+    } else if (text.rfind("iio:", 0) == 0) {
+        c.kind = accel::AccelSourceKind::iio;
+        const std::string rest = text.substr(4);
+        const auto comma = rest.find(',');
+        c.iio.device_dir = rest.substr(0, comma);
+        c.iio.buffer_path = comma == std::string::npos
+                                ? "/dev/" + c.iio.device_dir.filename().string()
+                                : rest.substr(comma + 1);
+    } else {
+        return core::make_error("--accel '" + text +
+                                "': expected udp://HOST:PORT or iio:DEVICE_DIR[,BUFFER]");
+    }
+    if (auto ok = accel::validate(c); !ok)
+        return core::make_error("--accel '" + text + "': " + ok.error().message);
+    return c;
+}
 
 std::string now_iso8601() {
     const std::time_t t = std::time(nullptr);
@@ -71,24 +102,51 @@ int run(GrabArgs a) {
         spdlog::error("{}", ok.error().message);
         return 1;
     }
-    auto beam = acquire::design_direct_beam({});
-    if (!beam) {
-        spdlog::error("{}", beam.error().message);
-        return 1;
-    }
-    auto tri = acquire::Triangulation::direct_beam(*beam);
+    // The cell's sensor as designed (a calibrated model replaces it on a real cell).
+    auto tri = vcell::sensor_triangulation(cell->sensor);
     if (!tri) {
         spdlog::error("{}", tri.error().message);
         return 1;
     }
     a.scan.offset_x_px = a.camera.offset_x;
-    a.scan.offset_y_px = a.camera.offset_y;
+    // Image rows are the region's; peak values count from the first row of the camera's window.
+    a.scan.offset_y_px = a.scan.frame_mode == "peaks" ? a.peak_row_offset : a.camera.offset_y;
+
+    // The accelerometer records from before the first profile to after the last (the
+    // compensation's margins), on its own thread into the ring.
+    std::optional<accel::AccelSourceConfig> accel_config;
+    if (!a.accel.empty()) {
+        auto c = parse_accel(a.accel);
+        if (!c) {
+            spdlog::error("{}", c.error().message);
+            return 2;
+        }
+        accel_config = *c;
+    }
+    accel::AccelRing ring(
+        accel::AccelRingConfig{.capacity_s = a.seconds + 4 * a.accel_margin_s + 10.0,
+                               .sample_rate_hz = 4000.0,
+                               .gap_periods = 3.0});
+    std::unique_ptr<accel::AccelSource> accel_source;
+    if (accel_config) {
+        auto src = accel::make_accel_source(*accel_config, ring);
+        if (!src) {
+            spdlog::error("{}", src.error().message);
+            return 1;
+        }
+        accel_source = std::move(*src);
+        if (auto ok = accel_source->start(); !ok) {
+            spdlog::error("{}", ok.error().message);
+            return 1;
+        }
+    }
 
     auto cam = acquire::Camera::open(a.camera);
     if (!cam) {
         spdlog::error("{}", cam.error().message);
         return 1;
     }
+    if (accel_source) std::this_thread::sleep_for(std::chrono::duration<double>(a.accel_margin_s));
     spdlog::info("grabbing {} s from {}", a.seconds, (*cam)->description());
     acquire::ScanBuilder builder(a.scan, *tri);
     if (auto ok = (*cam)->start(); !ok) {
@@ -124,10 +182,35 @@ int run(GrabArgs a) {
     rec.captured_at = now_iso8601();
     rec.temperature_c = a.temperature_c;
     rec.faces.push_back(builder.take());
-    if (rec.faces[0].n_profiles() == 0) {
+    auto& scanned = rec.faces[0];
+    if (scanned.n_profiles() == 0) {
         spdlog::error("scan failed: no frame arrived in {} s ({} timeouts, {} incomplete)",
                       a.seconds, cs.timeouts, cs.incomplete);
         return 1;
+    }
+    std::string accel_summary = "no accelerometer (K = 0)";
+    if (accel_source) {
+        const auto margin_ns = static_cast<std::int64_t>(a.accel_margin_s * 1e9);
+        const std::int64_t t0 = scanned.profile_times_ns.front() - margin_ns;
+        const std::int64_t t1 = scanned.profile_times_ns.back() + margin_ns;
+        // Samples after the margin's end arrive a datagram or so later: wait, bounded.
+        ring.wait_for(
+            t1, std::chrono::milliseconds(static_cast<long long>(1000 + 2000 * a.accel_margin_s)));
+        accel_source->stop();
+        const accel::AccelWindow w = ring.copy_range(t0, t1);
+        for (const auto& smp : w.samples) {
+            scanned.accel_times_ns.push_back(smp.t_ns);
+            scanned.accel_mps2.insert(scanned.accel_mps2.end(),
+                                      {smp.x_mps2, smp.y_mps2, smp.z_mps2});
+        }
+        const auto status = accel_source->status();
+        accel_summary = std::to_string(w.samples.size()) + " accelerometer samples (" +
+                        std::to_string(w.gaps.size()) + " gaps, " +
+                        std::to_string(w.missing_samples) + " missing" +
+                        (w.covered() ? "" : ", margins NOT covered") + ")";
+        if (!w.complete())
+            spdlog::warn("accelerometer record incomplete around the scan: {} (source: {})",
+                         accel_summary, status.error.empty() ? "running" : status.error);
     }
     if (auto ok = io::write_recording(rec, a.out); !ok) {
         spdlog::error("{}", ok.error().message);
@@ -137,14 +220,23 @@ int run(GrabArgs a) {
     std::printf(
         "grabbed %s: %lld frames (%lld incomplete, %lld timeouts, %lld refused), %lld profiles "
         "over %.3f s; points: %lld ok, %lld no return, %lld dark, %lld saturated, %lld double "
-        "peak; no accelerometer (K = 0) -> %s\n",
+        "peak; %s -> %s\n",
         a.scan.face.c_str(), static_cast<long long>(st.frames),
         static_cast<long long>(cs.incomplete), static_cast<long long>(cs.timeouts),
         static_cast<long long>(st.refused_frames), static_cast<long long>(st.profiles),
         static_cast<double>(times.back() - times.front()) * 1e-9, static_cast<long long>(st.ok),
         static_cast<long long>(st.no_return), static_cast<long long>(st.dark),
         static_cast<long long>(st.saturated), static_cast<long long>(st.double_peak),
-        a.out.c_str());
+        accel_summary.c_str(), a.out.c_str());
+    std::printf(
+        "stream: %llu completed, %llu failures, %llu underruns, %llu missing frames, %llu "
+        "missing packets, %llu resend requests, %llu resent packets\n",
+        static_cast<unsigned long long>(cs.completed), static_cast<unsigned long long>(cs.failures),
+        static_cast<unsigned long long>(cs.underruns),
+        static_cast<unsigned long long>(cs.missing_frames),
+        static_cast<unsigned long long>(cs.missing_packets),
+        static_cast<unsigned long long>(cs.resend_requests),
+        static_cast<unsigned long long>(cs.resent_packets));
     return 0;
 }
 
@@ -176,6 +268,14 @@ Command add_grab(CLI::App& app) {
         ->capture_default_str();
     s->add_option("--profiles-per-frame", a->scan.peaks.profiles_per_frame,
                   "peaks mode: profiles per frame")
+        ->capture_default_str();
+    s->add_option("--peak-row-offset", a->peak_row_offset,
+                  "peaks mode: first sensor row of the camera's window")
+        ->capture_default_str();
+    s->add_option("--accel", a->accel,
+                  "accelerometer: udp://HOST:PORT (bind) or iio:DEVICE_DIR[,BUFFER]; default none");
+    s->add_option("--accel-margin-s", a->accel_margin_s,
+                  "accelerometer record before and after the scan, s")
         ->capture_default_str();
     s->add_option("--part-id", a->part_id, "part id for part.yaml")->capture_default_str();
     s->add_option("--recipe", a->recipe, "recipe name for part.yaml")->capture_default_str();

@@ -2,11 +2,14 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <csignal>
+#include <ctime>
 
 #include "commands.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/io/recording_io.hpp"
 #include "hotgauge/sim/simulator.hpp"
+#include "hotgauge/vcell/virtual_cell.hpp"
 
 namespace hotgauge::app {
 namespace {
@@ -23,7 +26,65 @@ struct SimulateArgs {
     std::optional<double> noise_mm, spike_fraction, dropout_fraction, max_tilt_deg;
     std::optional<double> yaw_deg;
     std::vector<double> offset_mm;
+    // --serve: the virtual cell instead of a recording.
+    bool serve = false;
+    vcell::VirtualCellConfig vc;
+    double line_rate_hz = 1000.0;
+    double seconds = 0.0;
 };
+
+// Serves the virtual cell until SIGINT/SIGTERM (or --seconds), then prints what it sent.
+int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cell,
+          const sim::SimOptions& opt) {
+    a.vc.recipe = recipe;
+    a.vc.cell = cell;
+    a.vc.part = opt;
+    a.vc.line_period_s = 1.0 / a.line_rate_hz;
+    // Signals are taken by sigtimedwait below: block them before any thread starts.
+    sigset_t signals;
+    sigemptyset(&signals);
+    sigaddset(&signals, SIGINT);
+    sigaddset(&signals, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+    auto cellp = vcell::VirtualCell::start(a.vc);
+    if (!cellp) {
+        spdlog::error("{}", cellp.error().message);
+        return 1;
+    }
+    auto& vcell = **cellp;
+    if (!a.truth.empty()) {
+        if (auto r = sim::write_truth(vcell.truth(), a.truth); !r) {
+            spdlog::error("{}", r.error().message);
+            return 1;
+        }
+    }
+    std::printf("serving virtual camera %s at %s (%s mode, face %s), accelerometer %s\n",
+                a.vc.device.serial.c_str(), a.vc.device.address.c_str(), a.vc.mode.c_str(),
+                a.vc.face.c_str(), a.vc.accel_to.empty() ? "off" : a.vc.accel_to.c_str());
+    std::fflush(stdout);
+    const auto t_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(a.seconds);
+    while (a.seconds <= 0 || std::chrono::steady_clock::now() < t_end) {
+        timespec wait{0, 200'000'000};
+        const int sig = sigtimedwait(&signals, nullptr, &wait);
+        if (sig == SIGINT || sig == SIGTERM) break;
+    }
+    const auto st = vcell.stats();
+    std::printf(
+        "served %llu frames (%llu packets, %llu dropped on purpose, %llu resend requests, %llu "
+        "resent, %llu unavailable), %llu acquisitions, %llu accelerometer datagrams (%llu "
+        "samples, %llu send errors)\n",
+        static_cast<unsigned long long>(st.camera.frames),
+        static_cast<unsigned long long>(st.camera.packets),
+        static_cast<unsigned long long>(st.camera.dropped),
+        static_cast<unsigned long long>(st.camera.resend_requests),
+        static_cast<unsigned long long>(st.camera.resent),
+        static_cast<unsigned long long>(st.camera.resend_unavailable),
+        static_cast<unsigned long long>(st.acquisitions),
+        static_cast<unsigned long long>(st.accel_datagrams),
+        static_cast<unsigned long long>(st.accel_samples),
+        static_cast<unsigned long long>(st.accel_send_errors));
+    return 0;
+}
 
 int run(const SimulateArgs& a) {
     auto recipe = io::read_recipe(a.recipe);
@@ -53,6 +114,11 @@ int run(const SimulateArgs& a) {
         opt.T_world_part = T;
     }
 
+    if (a.serve) return serve(a, *recipe, c, opt);
+    if (a.out.empty()) {
+        spdlog::error("simulate: --out is required (or --serve)");
+        return 2;
+    }
     const auto t0 = std::chrono::steady_clock::now();
     auto sim = sim::simulate(*recipe, c, opt);
     if (!sim) {
@@ -86,7 +152,7 @@ Command add_simulate(CLI::App& app) {
     auto a = std::make_shared<SimulateArgs>();
     auto* s =
         app.add_subcommand("simulate", "simulate one part scan into a recording + ground truth");
-    s->add_option("--out,-o", a->out, "recording folder to write")->required();
+    s->add_option("--out,-o", a->out, "recording folder to write");
     s->add_option("--truth", a->truth, "ground-truth folder (default: OUT.truth)");
     s->add_option("--recipe", a->recipe, "part recipe")->capture_default_str();
     s->add_option("--cell", a->cell, "cell configuration")->capture_default_str();
@@ -110,6 +176,33 @@ Command add_simulate(CLI::App& app) {
         ->capture_default_str();
     s->add_flag("--no-vibration", a->no_vibration, "no press vibration");
     s->add_flag("--quick", a->quick, "coarse sensor for tests (W/4, 1 mm profiles)");
+    // The virtual cell (docs/virtual-cell.md).
+    s->add_flag("--serve", a->serve,
+                "serve the virtual cell: a GigE Vision camera and the accelerometer stream");
+    s->add_option("--address", a->vc.device.address, "serve: camera address (127.x.y.z)")
+        ->capture_default_str();
+    s->add_option("--serial", a->vc.device.serial, "serve: camera serial number")
+        ->capture_default_str();
+    s->add_option("--face", a->vc.face, "serve: the face being scanned")->capture_default_str();
+    s->add_option("--mode", a->vc.mode, "serve: frame mode")
+        ->check(CLI::IsMember({"image", "peaks"}))
+        ->capture_default_str();
+    s->add_option("--accel-to", a->vc.accel_to, "serve: send accelerometer datagrams to HOST:PORT");
+    s->add_option("--speed-mm-s", a->vc.speed_mm_s, "serve: scan axis speed")
+        ->capture_default_str();
+    s->add_option("--line-rate", a->line_rate_hz, "serve: peaks mode profiles per second")
+        ->capture_default_str();
+    s->add_option("--fractional-bits", a->vc.peaks.fractional_bits,
+                  "serve: peaks mode fractional bits")
+        ->capture_default_str();
+    s->add_option("--peak-row-offset", a->vc.peak_row_offset,
+                  "serve: peaks mode first sensor row of the window")
+        ->capture_default_str();
+    s->add_option("--packet-loss", a->vc.device.packet_loss,
+                  "serve: fraction of GVSP packets the link drops (resend recovers them)")
+        ->capture_default_str();
+    s->add_option("--seconds", a->seconds, "serve: stop after this long (0: at SIGINT/SIGTERM)")
+        ->capture_default_str();
     return [a] { return run(*a); };
 }
 

@@ -69,7 +69,7 @@ void Vibration::evaluate(double t_s, J* out) const {
     for (auto it = first; it != blows_.end(); ++it) {
         const Blow& b = *it;
         const double tau = t_s - b.t_s;
-        if (tau <= 0.0) continue;
+        if (tau <= 0.0) break;  // this blow and all later ones are still to come
         // Smooth onset: (1 - e^{-τ/τ_on})² starts with zero displacement, velocity and
         // acceleration.
         const Jet rise = 1.0 - exp_lin(-1.0 / config_.onset_s, tau);

@@ -37,6 +37,9 @@ struct StreamStats {
     std::int64_t incomplete = 0;  // buffers with missing packets or another error status
     std::int64_t timeouts = 0;    // waits that saw no buffer
     std::uint64_t completed = 0, failures = 0, underruns = 0;  // Aravis stream statistics
+    // GigE Vision streams: frames the receiver saw no packet of, packets missing after resend,
+    // packets asked for again and packets received again.
+    std::uint64_t missing_frames = 0, missing_packets = 0, resend_requests = 0, resent_packets = 0;
 };
 
 // One received buffer, copied out of the pool.

@@ -1,0 +1,73 @@
+#pragma once
+// A GigE Vision device on a loopback address (docs/virtual-cell.md): Aravis's fake camera
+// (ArvFakeCamera: its GenICam description and register model, public API of libaravis 0.8) behind
+// our own GVCP control channel and GVSP stream. Written here rather than taken whole from
+// ArvGvFakeCamera because a measuring cell needs what that one does not do: packet resend (a
+// resend buffer of recent frames answering PACKETRESEND commands), deterministic packet loss on
+// the link, and frames rendered by a callback that knows the frame's timestamp.
+// Any GigE Vision client reaches it: Aravis (`hotgauge grab --camera 127.0.0.2`), arv-tool.
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "hotgauge/core/result.hpp"
+
+namespace hotgauge::vcell {
+
+// What the renderer is asked for: the region and format the client configured, the exposure it
+// set, and the frame's timestamp (the device clock: CLOCK_REALTIME, ns).
+struct FrameRequest {
+    std::uint32_t frame_id = 0;             // GVSP block id, 1..65535
+    std::int64_t timestamp_ns = 0;          // start of exposure; also in the GVSP leader
+    std::uint64_t acquisition = 0;          // +1 at each AcquisitionStart
+    std::int64_t frame_in_acquisition = 0;  // 0 for the first frame after AcquisitionStart
+    int width = 0, height = 0, offset_x = 0, offset_y = 0;
+    int bytes_per_pixel = 1;
+    std::uint32_t pixel_format = 0;  // PFNC code
+    double exposure_us = 0;
+};
+
+// Fills `data` (width × height × bytes_per_pixel, row-major, little-endian words) for `request`.
+// Called on the device's stream thread.
+using Renderer = std::function<void(const FrameRequest& request, std::span<std::uint8_t> data)>;
+
+struct GvDeviceConfig {
+    std::string address = "127.0.0.1";  // any 127.x.y.z: several devices side by side
+    std::string serial = "HG-VCELL";
+    std::string genicam_file;       // "" = Aravis's built-in fake camera description
+    double packet_loss = 0.0;       // fraction of first transmissions the link drops
+    std::uint64_t loss_seed = 1;    // the drops are reproducible
+    int resend_buffer_frames = 64;  // frames kept for PACKETRESEND
+};
+
+struct GvDeviceStats {
+    std::uint64_t frames = 0, packets = 0;
+    std::uint64_t dropped = 0;             // first transmissions dropped on purpose
+    std::uint64_t resend_requests = 0;     // PACKETRESEND commands received
+    std::uint64_t resent = 0;              // packets sent again
+    std::uint64_t resend_unavailable = 0;  // asked for packets no longer buffered
+};
+
+// Thread safety: stats() from any thread; the renderer runs on the stream thread.
+class GvDevice {
+  public:
+    // Binds GVCP port 3956 on the address and starts the control and stream threads. The error
+    // names the address (e.g. already in use by another device).
+    static core::Result<std::unique_ptr<GvDevice>> start(const GvDeviceConfig& config,
+                                                         Renderer renderer);
+    ~GvDevice();  // stops both threads; the device vanishes from the network
+    GvDevice(const GvDevice&) = delete;
+    GvDevice& operator=(const GvDevice&) = delete;
+
+    GvDeviceStats stats() const;
+    const GvDeviceConfig& config() const;
+
+  private:
+    struct Impl;
+    explicit GvDevice(std::unique_ptr<Impl> impl);
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace hotgauge::vcell

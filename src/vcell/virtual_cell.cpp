@@ -1,0 +1,205 @@
+#include "hotgauge/vcell/virtual_cell.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <mutex>
+#include <optional>
+#include <thread>
+
+#include "hotgauge/accel/udp.hpp"
+#include "hotgauge/sim/scene.hpp"
+#include "hotgauge/sim/vibration.hpp"
+#include "log.hpp"
+
+namespace hotgauge::vcell {
+namespace {
+
+std::int64_t now_ns() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+}
+
+constexpr double kServeHorizonS = 7 * 24 * 3600.0;  // press blows are drawn for a week
+
+}  // namespace
+
+struct VirtualCell::Impl {
+    VirtualCellConfig config;
+    const sim::FaceConfig* face = nullptr;
+    std::optional<sim::Scene> scene;
+    std::optional<sim::Vibration> vibration;
+    std::optional<acquire::Triangulation> triangulation;
+    std::int64_t t0_ns = 0;  // the vibration's time origin
+    std::unique_ptr<GvDevice> device;
+
+    // Stream thread (the device's renderer) only.
+    sim::RandomStream render_rng{0};
+    std::vector<sim::RayReturn> returns;
+    std::vector<std::uint16_t> words;
+    std::uint64_t acquisition = 0;
+    std::int64_t t_scan_start_ns = 0;
+    bool warned_format = false;
+
+    // Accelerometer thread.
+    std::optional<accel::UdpAccelSender> sender;
+    std::thread accel_thread;
+    std::atomic<bool> stop{false};
+
+    mutable std::mutex stats_mutex;
+    VirtualCellStats stats;
+
+    ~Impl() {
+        stop = true;
+        if (accel_thread.joinable()) accel_thread.join();
+        device.reset();  // stops the renderer's thread before the scene goes
+    }
+
+    Eigen::Vector3d sensor_origin(std::int64_t t_ns) const {
+        const double travel_mm =
+            config.speed_mm_s * static_cast<double>(t_ns - t_scan_start_ns) * 1e-9;
+        const Eigen::Vector3d u =
+            vibration->displacement_mm(static_cast<double>(t_ns - t0_ns) * 1e-9);
+        return face->T_world_camera.translation() + travel_mm * face->scan_direction.normalized() +
+               u;
+    }
+
+    void render(const FrameRequest& req, std::span<std::uint8_t> data);
+    void run_accel();
+};
+
+void VirtualCell::Impl::render(const FrameRequest& req, std::span<std::uint8_t> data) {
+    if (req.acquisition != acquisition) {
+        acquisition = req.acquisition;
+        t_scan_start_ns = req.timestamp_ns;
+        std::lock_guard lock(stats_mutex);
+        ++stats.acquisitions;
+    }
+    if (config.mode == "image") {
+        sim::ProfileEffects effects;  // the image's own noise replaces the range noise;
+        effects.range_noise = false;  // reflections are drawn as second stripes
+        effects.spikes = false;
+        scene->cast_profile(*face, sensor_origin(req.timestamp_ns), render_rng, returns, effects);
+        StripeLook look = config.look;
+        look.full_scale = req.bytes_per_pixel == 1 ? 255 : config.look.full_scale;
+        render_stripe(returns, *triangulation, look, req.exposure_us,
+                      look.glow * glow_scale(config.part.temperature_c), req.width, req.height,
+                      req.offset_x, req.offset_y, req.bytes_per_pixel, render_rng, data);
+        return;
+    }
+    const int rpp = config.peaks.rows_per_profile();
+    if (req.bytes_per_pixel != 2 || req.height < rpp) {
+        if (!warned_format)
+            detail::log().warn(
+                "peaks mode needs Mono16 frames of at least {} rows (got {} bytes "
+                "per pixel, {} rows): sending empty frames",
+                rpp, req.bytes_per_pixel, req.height);
+        warned_format = true;
+        return;
+    }
+    const int profiles = req.height / rpp;
+    const auto w = static_cast<std::size_t>(req.width);
+    words.assign(w * static_cast<std::size_t>(req.height), 0);
+    const auto period_ns = static_cast<std::int64_t>(std::llround(config.line_period_s * 1e9));
+    for (int k = 0; k < profiles; ++k) {
+        const std::int64_t t = req.timestamp_ns + k * period_ns;
+        scene->cast_profile(*face, sensor_origin(t), render_rng, returns);
+        render_peaks(returns, *triangulation, config.peaks, req.width, req.offset_x,
+                     config.peak_row_offset, words.data() + static_cast<std::size_t>(k * rpp) * w);
+    }
+    std::memcpy(data.data(), words.data(), std::min(data.size(), words.size() * 2));
+}
+
+void VirtualCell::Impl::run_accel() {
+    const auto& a = config.cell.accel;
+    const auto period_ns = static_cast<std::int64_t>(std::llround(1e9 / a.rate_hz));
+    const auto per_datagram =
+        static_cast<std::size_t>(std::clamp(std::llround(a.rate_hz * config.accel_datagram_s), 1LL,
+                                            static_cast<long long>(accel::kDatagramMaxSamples)));
+    sim::RandomStream rng(config.part.seed ^ 0xacce1);
+    const sim::AccelHead head(a, face->T_world_camera.linear() * face->R_camera_accel, rng);
+    std::int64_t next_ns = (now_ns() / period_ns + 1) * period_ns;  // samples on a fixed grid
+    std::vector<float> batch;
+    while (!stop) {
+        std::this_thread::sleep_for(std::chrono::duration<double>(config.accel_datagram_s));
+        const std::int64_t now = now_ns();
+        while (next_ns + static_cast<std::int64_t>(per_datagram - 1) * period_ns <= now) {
+            batch.clear();
+            for (std::size_t q = 0; q < per_datagram; ++q) {
+                const std::int64_t t = next_ns + static_cast<std::int64_t>(q) * period_ns;
+                const Eigen::Vector3f s =
+                    head.sample(*vibration, static_cast<double>(t - t0_ns) * 1e-9, rng);
+                batch.insert(batch.end(), s.data(), s.data() + 3);
+            }
+            const bool ok =
+                sender->send(next_ns, static_cast<std::uint32_t>(period_ns), batch).ok();
+            next_ns += static_cast<std::int64_t>(per_datagram) * period_ns;
+            std::lock_guard lock(stats_mutex);
+            if (ok) {
+                ++stats.accel_datagrams;
+                stats.accel_samples += per_datagram;
+            } else {
+                ++stats.accel_send_errors;
+            }
+        }
+    }
+}
+
+VirtualCell::VirtualCell(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+VirtualCell::~VirtualCell() = default;
+
+const sim::SimTruth& VirtualCell::truth() const { return impl_->scene->truth(); }
+
+VirtualCellStats VirtualCell::stats() const {
+    std::lock_guard lock(impl_->stats_mutex);
+    VirtualCellStats s = impl_->stats;
+    s.camera = impl_->device->stats();
+    return s;
+}
+
+core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig config) {
+    auto impl = std::make_unique<Impl>();
+    impl->config = std::move(config);
+    VirtualCellConfig& c = impl->config;
+    if (c.mode != "image" && c.mode != "peaks")
+        return core::make_error("virtual cell: mode '" + c.mode + "' is not image or peaks");
+    for (const auto& f : c.cell.faces)
+        if (f.name == c.face) impl->face = &f;
+    if (!impl->face) return core::make_error("virtual cell: no face '" + c.face + "' in the cell");
+    if (c.mode == "peaks")
+        if (auto ok = acquire::check_peak_format(c.peaks); !ok) return ok.error();
+    if (!(c.speed_mm_s > 0)) return core::make_error("virtual cell: speed_mm_s must be > 0");
+    if (!(c.cell.accel.rate_hz > 0))
+        return core::make_error("virtual cell: accelerometer rate must be > 0");
+
+    std::mt19937_64 rng(c.part.seed);
+    auto scene = sim::Scene::create(c.recipe, c.cell, c.part, rng);
+    if (!scene) return scene.error();
+    impl->scene.emplace(std::move(*scene));
+    std::mt19937_64 scan_rng(c.part.scan_seed ? *c.part.scan_seed : rng());
+    impl->vibration.emplace(c.cell.vibration, 0.0, kServeHorizonS, scan_rng);
+    impl->render_rng = sim::RandomStream(scan_rng());
+    auto tri = sensor_triangulation(c.cell.sensor);
+    if (!tri) return tri.error();
+    impl->triangulation.emplace(std::move(*tri));
+    impl->t0_ns = now_ns();
+
+    if (!c.accel_to.empty()) {
+        auto sender = accel::UdpAccelSender::open(c.accel_to, c.accel_sensor_id);
+        if (!sender) return sender.error();
+        impl->sender.emplace(std::move(*sender));
+    }
+    Impl* raw = impl.get();
+    auto device = GvDevice::start(
+        c.device,
+        [raw](const FrameRequest& req, std::span<std::uint8_t> data) { raw->render(req, data); });
+    if (!device) return device.error();
+    impl->device = std::move(*device);
+    if (impl->sender) impl->accel_thread = std::thread([raw] { raw->run_accel(); });
+    detail::log().info("virtual cell: face {}, {} mode, {} mm/s, accelerometer {}", c.face, c.mode,
+                       c.speed_mm_s, c.accel_to.empty() ? "off" : "-> " + c.accel_to);
+    return std::unique_ptr<VirtualCell>(new VirtualCell(std::move(impl)));
+}
+
+}  // namespace hotgauge::vcell
