@@ -256,6 +256,8 @@ Command add_grab(CLI::App& app) {
         ->capture_default_str();
     s->add_option("--width", a->camera.width, "region width (0: as is)");
     s->add_option("--height", a->camera.height, "region height (0: as is)");
+    s->add_option("--offset-x", a->camera.offset_x, "region offset x, pixels");
+    s->add_option("--offset-y", a->camera.offset_y, "region offset y, pixels");
     s->add_option("--pixel-format", a->camera.pixel_format, "Mono8, Mono16 (default: as is)");
     s->add_option("--frame-rate", a->camera.frame_rate_hz, "free-run frame rate, Hz");
     s->add_option("--exposure-us", a->camera.exposure_us, "exposure time, µs");

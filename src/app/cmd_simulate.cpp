@@ -70,10 +70,12 @@ int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cel
     }
     const auto st = vcell.stats();
     std::printf(
-        "served %llu frames (%llu packets, %llu dropped on purpose, %llu resend requests, %llu "
+        "served %llu frames (%llu skipped, %llu packets, %llu dropped on purpose, %llu resend "
+        "requests, %llu "
         "resent, %llu unavailable), %llu acquisitions, %llu accelerometer datagrams (%llu "
         "samples, %llu send errors)\n",
         static_cast<unsigned long long>(st.camera.frames),
+        static_cast<unsigned long long>(st.camera.skipped),
         static_cast<unsigned long long>(st.camera.packets),
         static_cast<unsigned long long>(st.camera.dropped),
         static_cast<unsigned long long>(st.camera.resend_requests),

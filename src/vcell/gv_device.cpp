@@ -317,29 +317,50 @@ void GvDevice::Impl::run_stream() {
     std::int64_t frame_in_acquisition = 0;
     std::uint32_t frame_id = 0;
     bool streaming_before = false;
+    std::int64_t next_us = 0;  // this frame's time, µs
     while (!stop) {
-        guint64 next_us = 0;
+        guint64 aligned_us = 0;  // the fake camera's next frame time on its period grid
+        std::int64_t period_us = 0;
         bool streaming = false;
         {
             std::lock_guard lock(camera_mutex);
             streaming = arv_fake_camera_get_control_channel_privilege(camera) != 0 &&
                         arv_fake_camera_get_acquisition_status(camera) != 0;
-            if (streaming) arv_fake_camera_get_sleep_time_for_next_frame(camera, &next_us);
+            if (streaming) {
+                arv_fake_camera_get_sleep_time_for_next_frame(camera, &aligned_us);
+                std::uint32_t p = 0;
+                arv_fake_camera_read_register(
+                    camera, ARV_FAKE_CAMERA_REGISTER_ACQUISITION_FRAME_PERIOD_US, &p);
+                period_us = p > 0 ? p : 1'000'000;
+            }
         }
         if (!streaming) {
             streaming_before = false;
             std::this_thread::sleep_for(std::chrono::milliseconds(5));
             continue;
         }
+        // Frames follow each other at the period from the first one, like exposures of a
+        // camera. One rendered late goes out late with its own timestamp (a camera's frame
+        // buffer); only when a second behind does the device skip ahead, and count it.
         if (!streaming_before) {
             ++acquisition;
             frame_in_acquisition = 0;
             streaming_before = true;
+            next_us = static_cast<std::int64_t>(aligned_us);
+        } else {
+            next_us += period_us;
+            if (real_time_us() - next_us > 1'000'000) {
+                const std::int64_t behind =
+                    (static_cast<std::int64_t>(aligned_us) - next_us) / period_us;
+                next_us = static_cast<std::int64_t>(aligned_us);
+                std::lock_guard lock(stats_mutex);
+                stats.skipped += static_cast<std::uint64_t>(std::max<std::int64_t>(0, behind));
+            }
         }
         // Until the frame's time, in slices so that stop() is prompt.
-        while (!stop && real_time_us() < static_cast<std::int64_t>(next_us))
-            std::this_thread::sleep_for(std::chrono::microseconds(std::min<std::int64_t>(
-                20000, static_cast<std::int64_t>(next_us) - real_time_us())));
+        while (!stop && real_time_us() < next_us)
+            std::this_thread::sleep_for(
+                std::chrono::microseconds(std::min<std::int64_t>(20000, next_us - real_time_us())));
         if (stop) break;
 
         FrameRequest req;
@@ -376,7 +397,7 @@ void GvDevice::Impl::run_stream() {
             static_cast<int>(ARV_PIXEL_FORMAT_BIT_PER_PIXEL(req.pixel_format) / 8);
         frame_id = frame_id % 65535 + 1;  // 16-bit block ids; 0 is reserved
         req.frame_id = frame_id;
-        req.timestamp_ns = static_cast<std::int64_t>(next_us) * 1000;
+        req.timestamp_ns = next_us * 1000;
         req.acquisition = acquisition;
         req.frame_in_acquisition = frame_in_acquisition++;
         data.assign(static_cast<std::size_t>(req.width) * static_cast<std::size_t>(req.height) *

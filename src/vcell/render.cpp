@@ -57,7 +57,7 @@ void render_stripe(std::span<const sim::RayReturn> returns,
     const auto& table = normal_table();
     const std::size_t mask = table.size() - 1;
 
-    // Per column: the stripe, and the glow where the column sees the part (a smooth band).
+    // Per column: where the stripe is and how bright (a diffuse surface: √cos of the incidence).
     std::vector<float> stripe_row(static_cast<std::size_t>(width), -1.0f);
     std::vector<float> amplitude(static_cast<std::size_t>(width), 0.0f);
     for (int c = 0; c < width; ++c) {
@@ -71,11 +71,6 @@ void render_stripe(std::span<const sim::RayReturn> returns,
     }
     const float glow = static_cast<float>(glow_fraction * full * exposure);
     const float black = static_cast<float>(look.black_level * full);
-    for (int r = 0; r < height; ++r) {
-        float* row = img.data() + static_cast<std::size_t>(r) * width;
-        const float band = 0.6f + 0.4f * std::cos(6.283f * static_cast<float>(r) / 700.0f);
-        for (int c = 0; c < width; ++c) row[c] = black + (amplitude[c] > 0 ? glow * band : 0.0f);
-    }
     // The stripe: a Gaussian across rows with multiplicative speckle; some columns also see a
     // reflection of it elsewhere on the part.
     const double sigma = look.sigma_px;
@@ -102,27 +97,31 @@ void render_stripe(std::span<const sim::RayReturn> returns,
                 draw(c, v, amplitude[c] * static_cast<float>(0.6 + 0.4 * rng.uniform()));
         }
     }
-    // Shot and read noise, quantisation, saturation.
-    const float read = static_cast<float>(look.read_noise * full);
+    // Background (black level, the glow as a smooth band where the column sees the part), shot
+    // and read noise, quantisation, saturation: one pass straight into the output.
+    const float read2 = static_cast<float>(look.read_noise * full * look.read_noise * full);
     const float inv_e = static_cast<float>(1.0 / look.electrons_per_count);
+    const bool eight_bit = bytes_per_pixel == 1;
+    if (out.size() < n * (eight_bit ? 1 : 2)) return;
     for (int r = 0; r < height; ++r) {
         std::size_t k = static_cast<std::size_t>(rng.engine()) & mask;
-        float* row = img.data() + static_cast<std::size_t>(r) * width;
+        const float band =
+            glow * (0.6f + 0.4f * std::cos(6.283f * static_cast<float>(r + offset_y) / 700.0f));
+        const std::size_t row0 = static_cast<std::size_t>(r) * static_cast<std::size_t>(width);
+        const float* row = img.data() + row0;
         for (int c = 0; c < width; ++c) {
-            const float s = row[c];
-            const float sd = std::sqrt(read * read + std::max(0.0f, s) * inv_e);
-            row[c] = std::clamp(std::round(s + sd * table[k]), 0.0f, full);
+            const float s = black + (amplitude[c] > 0 ? band : 0.0f) + row[c];
+            const float noisy = s + std::sqrt(read2 + s * inv_e) * table[k];
             k = (k + 1) & mask;
-        }
-    }
-    if (bytes_per_pixel == 1) {
-        for (std::size_t i = 0; i < n && i < out.size(); ++i)
-            out[i] = static_cast<std::uint8_t>(img[i]);
-    } else {
-        for (std::size_t i = 0; i < n && 2 * i + 1 < out.size(); ++i) {
-            const auto v = static_cast<std::uint16_t>(img[i]);
-            out[2 * i] = static_cast<std::uint8_t>(v & 0xff);  // little-endian pixels (GVSP)
-            out[2 * i + 1] = static_cast<std::uint8_t>(v >> 8);
+            // Round half up by truncation: the value is clamped non-negative first.
+            const auto v = static_cast<std::uint16_t>(std::clamp(noisy, 0.0f, full) + 0.5f);
+            const std::size_t i = row0 + static_cast<std::size_t>(c);
+            if (eight_bit) {
+                out[i] = static_cast<std::uint8_t>(v);
+            } else {
+                out[2 * i] = static_cast<std::uint8_t>(v & 0xff);  // little-endian (GVSP)
+                out[2 * i + 1] = static_cast<std::uint8_t>(v >> 8);
+            }
         }
     }
 }

@@ -44,6 +44,7 @@ struct GvDeviceConfig {
 
 struct GvDeviceStats {
     std::uint64_t frames = 0, packets = 0;
+    std::uint64_t skipped = 0;             // frames not rendered: the device fell a second behind
     std::uint64_t dropped = 0;             // first transmissions dropped on purpose
     std::uint64_t resend_requests = 0;     // PACKETRESEND commands received
     std::uint64_t resent = 0;              // packets sent again
