@@ -90,15 +90,17 @@ grep -q "(0 gaps, 0 missing)" "$tmp/peaks.grab" || fail "peaks: accelerometer re
 "$bin" measure "$tmp/peaks" --json > "$tmp/peaks.json" 2> /dev/null || true
 compare "$tmp/offline.json" "$tmp/peaks.json" peaks || fail "peaks mode dimensions"
 
-# Image mode: Mono8 stripe images, rows 256..959 of the sensor, 40 frames/s, 40 mm/s.
+# Image mode: Mono8 stripe images of sensor rows 320..863 (z ≈ 845..935 mm), 40 frames/s at
+# 24 mm/s (0.6 mm profiles), exposure from the temperature table.
 port=$(free_udp_port)
-serve image --mode image --speed-mm-s 40 --accel-to "127.0.0.1:$port"
-"$bin" grab "${grab_common[@]}" --mode image --width 2048 --height 704 --offset-y 256 \
-  --pixel-format Mono8 --max-value 255 --exposure-us 100 --frame-rate 40 --speed-mm-s 40 \
-  --seconds 6 --accel "udp://127.0.0.1:$port" --out "$tmp/image" > "$tmp/image.grab" \
+serve image --mode image --speed-mm-s 24 --accel-to "127.0.0.1:$port"
+"$bin" grab "${grab_common[@]}" --mode image --width 2048 --height 544 --offset-y 320 \
+  --pixel-format Mono8 --max-value 255 --exposure-table 20:400,700:200,1000:100,1200:50 \
+  --frame-rate 40 --speed-mm-s 24 --seconds 10 --accel "udp://127.0.0.1:$port" --out "$tmp/image" > "$tmp/image.grab" \
   2> "$tmp/image.grab.err" || fail "image grab: $(cat "$tmp/image.grab" "$tmp/image.grab.err")"
 stop_serving
 cat "$tmp/image.grab" "$tmp/image.out"
+grep -q "exposure 100.0 µs for 1000 °C (table)" "$tmp/image.grab.err" || fail "exposure table not applied"
 [ -f "$validator" ] && { $py "$validator" "$tmp/image" > /dev/null || fail "validator: image recording"; }
 "$bin" measure "$tmp/image" --json > "$tmp/image.json" 2> /dev/null || true
 compare "$tmp/offline.json" "$tmp/image.json" image || fail "image mode dimensions"

@@ -12,6 +12,7 @@
 #include "hotgauge/accel/source.hpp"
 #include "hotgauge/acquire/camera.hpp"
 #include "hotgauge/acquire/scan.hpp"
+#include "hotgauge/acquire/session.hpp"
 #include "hotgauge/io/recording_io.hpp"
 #include "hotgauge/sim/simulator.hpp"
 #include "hotgauge/vcell/render.hpp"
@@ -31,9 +32,27 @@ struct GrabArgs {
     double seconds = 1.0;
     int fractional_bits = 6;
     int peak_row_offset = 0;
+    std::string exposure_table;    // "T:E,..." °C:µs; applied when the temperature is known
     std::string accel;             // udp://HOST:PORT | iio:DEVICE_DIR[,BUFFER]; "" = none
     double accel_margin_s = 0.75;  // accelerometer record before and after the scan
 };
+
+// --exposure-table "T:E,T:E,...": °C and µs pairs.
+core::Result<acquire::ExposureTable> parse_exposure_table(const std::string& text) {
+    std::vector<std::pair<double, double>> points;
+    std::size_t at = 0;
+    while (at < text.size()) {
+        const auto end = std::min(text.find(',', at), text.size());
+        const std::string item = text.substr(at, end - at);
+        double t = 0, e = 0;
+        char tail = 0;
+        if (std::sscanf(item.c_str(), "%lf:%lf%c", &t, &e, &tail) != 2)
+            return core::make_error("'" + item + "': expected TEMPERATURE_C:EXPOSURE_US");
+        points.emplace_back(t, e);
+        at = end + 1;
+    }
+    return acquire::ExposureTable::create(std::move(points));
+}
 
 // --accel SOURCE → the accelerometer source config; the error names the option.
 core::Result<accel::AccelSourceConfig> parse_accel(const std::string& text) {
@@ -141,53 +160,35 @@ int run(GrabArgs a) {
         }
     }
 
-    auto cam = acquire::Camera::open(a.camera);
-    if (!cam) {
-        spdlog::error("{}", cam.error().message);
-        return 1;
+    auto table = parse_exposure_table(a.exposure_table);
+    if (!table) {
+        spdlog::error("--exposure-table: {}", table.error().message);
+        return 2;
     }
-    if (accel_source) std::this_thread::sleep_for(std::chrono::duration<double>(a.accel_margin_s));
-    spdlog::info("grabbing {} s from {}", a.seconds, (*cam)->description());
-    acquire::ScanBuilder builder(a.scan, *tri);
-    if (auto ok = (*cam)->start(); !ok) {
+    acquire::CameraSession session(a.camera, a.scan, *tri, *table);
+    if (auto ok = session.connect(); !ok) {
         spdlog::error("{}", ok.error().message);
         return 1;
     }
-    const auto t_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(a.seconds);
-    // A scan whose last wait saw no frame ended with the camera gone or stalled: it fails, as
-    // one that lost the camera earlier does; a part of a scan is never passed on as the scan.
-    std::string last_error;
-    while (std::chrono::steady_clock::now() < t_end) {
-        auto frame = (*cam)->next();
-        if (frame) {
-            builder.add(*frame);
-            last_error.clear();
-            continue;
-        }
-        last_error = frame.error().message;
-        if ((*cam)->lost()) break;
-        spdlog::warn("{}", last_error);
-    }
-    (*cam)->stop();
-    if (!last_error.empty()) {
-        spdlog::error("scan failed after {} frames: camera lost or stalled: {}",
-                      builder.stats().frames, last_error);
+    if (accel_source) std::this_thread::sleep_for(std::chrono::duration<double>(a.accel_margin_s));
+    spdlog::info("grabbing {} s", a.seconds);
+    auto outcome = session.scan(a.seconds, a.temperature_c);
+    if (!outcome) {
+        spdlog::error("{}", outcome.error().message);
         return 1;
     }
-    const auto& st = builder.stats();
-    const auto& cs = (*cam)->stats();
+    if (outcome->exposure_us)
+        spdlog::info("exposure {:.1f} µs for {:.0f} °C (table)", *outcome->exposure_us,
+                     *a.temperature_c);
+    const auto& st = outcome->scan;
+    const auto& cs = outcome->stream;
     core::Recording rec;
     rec.part_id = a.part_id;
     rec.recipe = a.recipe;
     rec.captured_at = now_iso8601();
     rec.temperature_c = a.temperature_c;
-    rec.faces.push_back(builder.take());
+    rec.faces.push_back(std::move(outcome->face));
     auto& scanned = rec.faces[0];
-    if (scanned.n_profiles() == 0) {
-        spdlog::error("scan failed: no frame arrived in {} s ({} timeouts, {} incomplete)",
-                      a.seconds, cs.timeouts, cs.incomplete);
-        return 1;
-    }
     std::string accel_summary = "no accelerometer (K = 0)";
     if (accel_source) {
         const auto margin_ns = static_cast<std::int64_t>(a.accel_margin_s * 1e9);
@@ -261,6 +262,8 @@ Command add_grab(CLI::App& app) {
     s->add_option("--pixel-format", a->camera.pixel_format, "Mono8, Mono16 (default: as is)");
     s->add_option("--frame-rate", a->camera.frame_rate_hz, "free-run frame rate, Hz");
     s->add_option("--exposure-us", a->camera.exposure_us, "exposure time, µs");
+    s->add_option("--exposure-table", a->exposure_table,
+                  "exposure from the part temperature: T_C:EXPOSURE_US,... (needs --temperature)");
     s->add_option("--feature", a->features, "GenICam feature NAME=VALUE (repeatable, in order)");
     s->add_option("--timeout-ms", a->camera.timeout_ms, "frame timeout")->capture_default_str();
     s->add_option("--speed-mm-s", a->scan.speed_mm_s, "scan axis speed")->capture_default_str();
