@@ -146,6 +146,11 @@ core::Result<void> Camera::start() {
 
 void Camera::stop() {
     if (!impl_->streaming) return;
+    // A lost camera is not asked: each unanswered GVCP command costs Aravis 5 × 500 ms.
+    if (lost()) {
+        impl_->streaming = false;
+        return;
+    }
     GError* e = nullptr;
     arv_camera_stop_acquisition(impl_->camera, &e);
     g_clear_error(&e);

@@ -39,7 +39,9 @@ CameraSession::CameraSession(CameraConfig camera, ScanConfig scan, Triangulation
       exposure_(std::move(exposure)),
       policy_(policy) {}
 
-CameraSession::~CameraSession() = default;
+CameraSession::~CameraSession() {
+    if (reaper_.joinable()) reaper_.join();
+}
 
 std::chrono::milliseconds CameraSession::backoff_remaining() const {
     const auto now = Clock::now();
@@ -48,7 +50,8 @@ std::chrono::milliseconds CameraSession::backoff_remaining() const {
 }
 
 void CameraSession::lose(const std::string& why) {
-    camera_.reset();
+    if (reaper_.joinable()) reaper_.join();
+    reaper_ = std::thread([camera = std::move(camera_)]() mutable { camera.reset(); });
     ++failures_;
     last_failure_ = why;
     // Backoff: first, first·factor, ... capped; a camera that is back is found within max.

@@ -9,6 +9,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -83,6 +84,10 @@ class CameraSession {
     ExposureTable exposure_;
     ReconnectPolicy policy_;
     std::unique_ptr<Camera> camera_;
+    // A lost camera is closed on this thread: Aravis's goodbye to a dead device takes seconds,
+    // which the failed scan's report must not wait for. Joined before the next close and at
+    // destruction.
+    std::thread reaper_;
     int failures_ = 0;
     Clock::time_point next_attempt_{};
     std::string last_failure_;

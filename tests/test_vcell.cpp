@@ -1,0 +1,330 @@
+// The virtual cell's parts against independent checks: rendered stripes against the extraction
+// with known centres, peak rows against their decoder, and the GigE Vision device against
+// Aravis (through acquire::Camera and acquire::CameraSession) on 127.0.0.4, in this process.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <mutex>
+#include <random>
+#include <thread>
+
+#include "hotgauge/accel/ring.hpp"
+#include "hotgauge/accel/udp.hpp"
+#include "hotgauge/acquire/camera.hpp"
+#include "hotgauge/acquire/session.hpp"
+#include "hotgauge/io/recipe.hpp"
+#include "hotgauge/sim/scene.hpp"
+#include "hotgauge/vcell/gv_device.hpp"
+#include "hotgauge/vcell/render.hpp"
+#include "hotgauge/vcell/virtual_cell.hpp"
+
+namespace hotgauge {
+namespace {
+
+constexpr const char* kAddress = "127.0.0.4";  // this test's own GigE Vision address
+
+sim::SensorConfig sensor() { return sim::SensorConfig{}; }
+
+// A profile whose ray i images at row rows[i] (column i), facing the sensor.
+std::vector<sim::RayReturn> profile_at_rows(const acquire::Triangulation& tri,
+                                            const std::vector<double>& rows) {
+    std::vector<sim::RayReturn> out(rows.size());
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+        const auto p = tri.to_camera(static_cast<double>(i), rows[i]);
+        out[i] = {static_cast<float>(p.x_mm), static_cast<float>(p.z_mm), 1.0f, false};
+    }
+    return out;
+}
+
+struct StripeError {
+    double rms_px = 0;
+    int n = 0;
+};
+
+StripeError render_and_extract(int bytes_per_pixel, double temperature_c) {
+    const auto tri = vcell::sensor_triangulation(sensor());
+    EXPECT_TRUE(tri.ok());
+    const int width = 2048, height = 1088;
+    std::mt19937_64 gen(11);
+    std::uniform_real_distribution<double> row(100.0, 990.0);
+    std::vector<double> rows(width);
+    for (auto& r : rows) r = row(gen);
+    const auto returns = profile_at_rows(*tri, rows);
+    // Rows come back through the float32 (x, z) of a RayReturn: the reference is that row.
+    std::vector<double> truth(width);
+    for (int i = 0; i < width; ++i) truth[i] = tri->to_image(returns[i].x_mm, returns[i].z_mm).v_px;
+
+    vcell::StripeLook look;
+    look.reflection_fraction = 0;  // here: accuracy only
+    look.full_scale = bytes_per_pixel == 1 ? 255 : 4095;
+    sim::RandomStream rng(5);
+    std::vector<std::uint8_t> image(static_cast<std::size_t>(width * height * bytes_per_pixel));
+    vcell::render_stripe(returns, *tri, look, 100.0, look.glow * vcell::glow_scale(temperature_c),
+                         width, height, 0, 0, bytes_per_pixel, rng, image);
+    acquire::StripeConfig config;
+    config.max_value = look.full_scale;
+    config.min_peak = bytes_per_pixel == 1 ? 20 : 40;
+    std::vector<acquire::StripePoint> points;
+    if (bytes_per_pixel == 1) {
+        points = acquire::extract_stripe(image.data(), width, height, width, config);
+    } else {
+        std::vector<std::uint16_t> words(image.size() / 2);
+        std::memcpy(words.data(), image.data(), image.size());
+        points = acquire::extract_stripe(words.data(), width, height, width, config);
+    }
+    StripeError e;
+    double sum2 = 0;
+    for (int i = 0; i < width; ++i) {
+        if (points[i].status != acquire::StripeStatus::kOk) continue;
+        const double d = points[i].row - truth[i];
+        sum2 += d * d;
+        ++e.n;
+    }
+    e.rms_px = std::sqrt(sum2 / std::max(1, e.n));
+    return e;
+}
+
+TEST(RenderStripe, ExtractionWithKnownCentresMono16) {
+    // Good contrast: stripe peak 0.6 of full scale over the glow of a part at 1 000 °C, speckle,
+    // shot and read noise. Issue 6: RMS ≤ 0.05 px.
+    const auto e = render_and_extract(2, 1000.0);
+    std::printf("Mono16, 1 000 °C: %d columns, RMS %.4f px\n", e.n, e.rms_px);
+    EXPECT_GT(e.n, 2000);
+    EXPECT_LE(e.rms_px, 0.05);
+}
+
+TEST(RenderStripe, ExtractionWithKnownCentresMono8) {
+    const auto e = render_and_extract(1, 1000.0);
+    std::printf("Mono8, 1 000 °C: %d columns, RMS %.4f px\n", e.n, e.rms_px);
+    EXPECT_GT(e.n, 2000);
+    EXPECT_LE(e.rms_px, 0.08);  // 8-bit quantisation of a 1.2 px stripe
+}
+
+TEST(RenderStripe, GlowGrowsWithTemperature) {
+    EXPECT_EQ(vcell::glow_scale(20.0), 0.0);
+    EXPECT_NEAR(vcell::glow_scale(1000.0), 1.0, 1e-12);
+    EXPECT_GT(vcell::glow_scale(1100.0), 3.0);  // Planck at 405 nm: steep
+    EXPECT_LT(vcell::glow_scale(900.0), 0.3);
+}
+
+TEST(RenderPeaks, DecodeToTheRenderedRows) {
+    const auto tri = vcell::sensor_triangulation(sensor());
+    ASSERT_TRUE(tri.ok());
+    std::vector<double> rows(2048);
+    for (std::size_t i = 0; i < rows.size(); ++i) rows[i] = 40.0 + 0.37 * static_cast<double>(i);
+    auto returns = profile_at_rows(*tri, rows);
+    returns[7].x_mm = returns[7].z_mm = std::numeric_limits<float>::quiet_NaN();  // no return
+    acquire::PeakFormat format;
+    format.intensity = true;
+    std::vector<std::uint16_t> frame(2048 * 2);
+    vcell::render_peaks(returns, *tri, format, 2048, 0, 32, frame.data());
+    const auto points = acquire::decode_peaks(frame.data(), 2048, format);
+    int ok = 0;
+    for (int i = 0; i < 2048; ++i) {
+        const double v = tri->to_image(returns[i].x_mm, returns[i].z_mm).v_px;
+        if (i == 7) {
+            EXPECT_EQ(points[i].status, acquire::StripeStatus::kNoReturn);
+            continue;
+        }
+        if (v - 32 >= 1024.0) {  // past 6 fractional bits' reach: outside the window
+            EXPECT_EQ(points[i].status, acquire::StripeStatus::kNoReturn) << i;
+            continue;
+        }
+        ASSERT_EQ(points[i].status, acquire::StripeStatus::kOk) << i;
+        EXPECT_NEAR(points[i].row + 32, v, 0.5 / 64 + 1e-9) << i;
+        EXPECT_NEAR(points[i].quality, 1.0f, 1e-3);
+        ++ok;
+    }
+    EXPECT_GT(ok, 1500);
+}
+
+// The device with a renderer that stamps each frame with its id and remembers what it was asked.
+struct Stamped {
+    std::mutex mutex;
+    std::vector<vcell::FrameRequest> requests;
+    void operator()(const vcell::FrameRequest& r, std::span<std::uint8_t> data) {
+        for (std::size_t i = 0; i < data.size(); ++i)
+            data[i] = static_cast<std::uint8_t>((r.frame_id + i) & 0xff);
+        std::lock_guard lock(mutex);
+        requests.push_back(r);
+    }
+};
+
+core::Result<std::unique_ptr<vcell::GvDevice>> start_device(Stamped& stamped, double loss = 0) {
+    vcell::GvDeviceConfig c;
+    c.address = kAddress;
+    c.serial = "HG-TEST";
+    c.packet_loss = loss;
+    return vcell::GvDevice::start(
+        c, [&stamped](const vcell::FrameRequest& r, std::span<std::uint8_t> d) { stamped(r, d); });
+}
+
+acquire::CameraConfig camera_config() {
+    acquire::CameraConfig c;
+    c.id = kAddress;
+    c.width = 256;
+    c.height = 64;
+    c.pixel_format = "Mono8";
+    c.frame_rate_hz = 100;
+    c.exposure_us = 250;
+    c.timeout_ms = 300;
+    return c;
+}
+
+TEST(GvDevice, AravisReceivesWhatWasRenderedWithItsTimestamps) {
+    Stamped stamped;
+    auto device = start_device(stamped, 0.02);  // 2 % of the packets dropped: resend recovers
+    ASSERT_TRUE(device.ok()) << device.error().message;
+    auto cam = acquire::Camera::open(camera_config());
+    ASSERT_TRUE(cam.ok()) << cam.error().message;
+    EXPECT_NE((*cam)->description().find("HG-TEST"), std::string::npos);
+    ASSERT_TRUE((*cam)->start().ok());
+    std::vector<acquire::Frame> frames;
+    while (frames.size() < 30) {
+        auto f = (*cam)->next();
+        ASSERT_TRUE(f.ok()) << f.error().message;
+        frames.push_back(std::move(*f));
+    }
+    (*cam)->stop();
+    std::lock_guard lock(stamped.mutex);
+    for (const auto& f : frames) {
+        ASSERT_EQ(f.width, 256);
+        ASSERT_EQ(f.height, 64);
+        // Find the request this frame answers: same timestamp; the pixels carry its id.
+        const auto it = std::find_if(stamped.requests.begin(), stamped.requests.end(),
+                                     [&](const auto& r) { return r.timestamp_ns == f.camera_ns; });
+        ASSERT_NE(it, stamped.requests.end()) << "a frame with a timestamp never rendered";
+        EXPECT_EQ(f.data[0], it->frame_id & 0xff);
+        EXPECT_EQ(f.data[1000], (it->frame_id + 1000) & 0xff);
+        EXPECT_NEAR(it->exposure_us, 250.0, 1.0);
+    }
+    for (std::size_t i = 1; i < frames.size(); ++i)  // 100 frames/s, none missing
+        EXPECT_EQ(frames[i].camera_ns - frames[i - 1].camera_ns, 10'000'000);
+    const auto st = (*device)->stats();
+    EXPECT_GT(st.dropped, 0u);
+    EXPECT_GE(st.resent, 1u);
+    EXPECT_EQ((*cam)->stats().incomplete, 0);
+}
+
+TEST(GvDevice, SecondDeviceOnTheSameAddressIsRefusedByName) {
+    Stamped stamped;
+    auto first = start_device(stamped);
+    ASSERT_TRUE(first.ok());
+    auto second = start_device(stamped);
+    ASSERT_FALSE(second.ok());
+    EXPECT_NE(second.error().message.find("127.0.0.4:3956"), std::string::npos)
+        << second.error().message;
+}
+
+TEST(CameraSession, LostCameraFailsTheScanAndIsReopenedWithBackoff) {
+    const auto tri = vcell::sensor_triangulation(sensor());
+    ASSERT_TRUE(tri.ok());
+    acquire::ScanConfig scan;
+    scan.stripe.max_value = 255;
+    auto table = acquire::ExposureTable::create({{20, 400}, {1000, 100}, {1200, 50}});
+    ASSERT_TRUE(table.ok());
+    acquire::ReconnectPolicy policy;
+    policy.first_backoff = std::chrono::milliseconds(200);
+    policy.max_backoff = std::chrono::milliseconds(800);
+    auto cc = camera_config();
+    cc.width = 2048;
+    cc.exposure_us = 0;
+    acquire::CameraSession session(cc, scan, *tri, *table, policy);
+
+    Stamped stamped;
+    auto device = start_device(stamped);
+    ASSERT_TRUE(device.ok());
+    auto ok = session.scan(0.3, 1100.0);
+    ASSERT_TRUE(ok.ok()) << ok.error().message;
+    EXPECT_GT(ok->face.n_profiles(), 10);
+    ASSERT_TRUE(ok->exposure_us);
+    EXPECT_DOUBLE_EQ(*ok->exposure_us, 75.0);  // halfway between 100 µs at 1000 °C and 50 at 1200
+    {
+        std::lock_guard lock(stamped.mutex);
+        EXPECT_NEAR(stamped.requests.back().exposure_us, 75.0, 1.0);
+    }
+
+    // The camera vanishes mid-scan: the scan fails with the reason, nothing partial comes back.
+    std::thread killer([&] {
+        std::this_thread::sleep_for(std::chrono::milliseconds(300));
+        device->reset();
+    });
+    auto lost = session.scan(3.0, 1100.0);
+    killer.join();
+    ASSERT_FALSE(lost.ok());
+    EXPECT_NE(lost.error().message.find("camera lost"), std::string::npos) << lost.error().message;
+    EXPECT_FALSE(session.connected());
+
+    // While it is away: attempts fail, and back off.
+    auto away = session.connect();
+    ASSERT_FALSE(away.ok());
+    EXPECT_NE(away.error().message.find("next attempt in"), std::string::npos)
+        << away.error().message;
+    std::this_thread::sleep_for(session.backoff_remaining());
+    EXPECT_FALSE(session.connect().ok());  // nobody at the address
+    EXPECT_GE(session.failures_in_a_row(), 2);
+    EXPECT_GT(session.backoff_remaining().count(), 200);  // grew
+
+    // It is back: the next attempt after the backoff reconnects and scans.
+    Stamped again;
+    auto back = start_device(again);
+    ASSERT_TRUE(back.ok());
+    std::this_thread::sleep_for(session.backoff_remaining());
+    auto after = session.scan(0.3, 20.0);
+    ASSERT_TRUE(after.ok()) << after.error().message;
+    EXPECT_GT(after->face.n_profiles(), 10);
+    EXPECT_DOUBLE_EQ(*after->exposure_us, 400.0);
+    EXPECT_EQ(session.failures_in_a_row(), 0);
+}
+
+TEST(ExposureTable, InterpolatesClampsAndNamesBadPoints) {
+    auto t = acquire::ExposureTable::create({{700, 200}, {1000, 100}});
+    ASSERT_TRUE(t.ok());
+    EXPECT_DOUBLE_EQ(t->exposure_us(20), 200);
+    EXPECT_DOUBLE_EQ(t->exposure_us(850), 150);
+    EXPECT_DOUBLE_EQ(t->exposure_us(1300), 100);
+    auto bad = acquire::ExposureTable::create({{700, 200}, {600, 100}});
+    ASSERT_FALSE(bad.ok());
+    EXPECT_NE(bad.error().message.find("point 2"), std::string::npos);
+    EXPECT_FALSE(acquire::ExposureTable::create({{700, 0}}).ok());
+}
+
+TEST(VirtualCell, AccelerometerStreamIsContinuousAndFeelsGravity) {
+    auto recipe = io::read_recipe(HOTGAUGE_SOURCE_DIR "/config/parts/hub-a.yaml");
+    ASSERT_TRUE(recipe.ok());
+    auto cell = sim::read_cell_config(HOTGAUGE_SOURCE_DIR "/config/cell.yaml");
+    ASSERT_TRUE(cell.ok());
+    accel::AccelRing ring({.capacity_s = 30, .sample_rate_hz = 2000, .gap_periods = 3});
+    accel::UdpReceiverConfig rc;
+    rc.bind = "127.0.0.1:0";
+    accel::UdpAccelReceiver receiver(rc, ring);
+    ASSERT_TRUE(receiver.start().ok());
+    vcell::VirtualCellConfig vc;
+    vc.recipe = *recipe;
+    vc.cell = *cell;
+    vc.device.address = kAddress;
+    vc.accel_to = "127.0.0.1:" + std::to_string(receiver.port());
+    auto vcell = vcell::VirtualCell::start(vc);
+    ASSERT_TRUE(vcell.ok()) << vcell.error().message;
+    const auto t0 = std::chrono::system_clock::now();
+    const auto ns = [](auto tp) {
+        return std::chrono::duration_cast<std::chrono::nanoseconds>(tp.time_since_epoch()).count();
+    };
+    const std::int64_t from = ns(t0) + 100'000'000, to = from + 500'000'000;
+    ASSERT_TRUE(ring.wait_for(to, std::chrono::milliseconds(5000)));
+    const auto w = ring.copy_range(from, to);
+    EXPECT_TRUE(w.complete());
+    EXPECT_NEAR(static_cast<double>(w.samples.size()), 1000.0, 2.0);  // 2 kHz
+    double gz = 0;  // top face: the accelerometer's z is along world −z... its norm is g
+    for (const auto& s : w.samples)
+        gz += std::sqrt(s.x_mps2 * s.x_mps2 + s.y_mps2 * s.y_mps2 + s.z_mps2 * s.z_mps2);
+    EXPECT_NEAR(gz / static_cast<double>(w.samples.size()), 9.81, 0.5);
+    receiver.stop();
+}
+
+}  // namespace
+}  // namespace hotgauge
