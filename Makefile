@@ -57,6 +57,7 @@ bench: build
 	cmake --build $(BUILD) -j $(JOBS) --target hotgauge_bench_match
 	$(BUILD)/tests/bench/hotgauge_bench
 	$(BUILD)/tests/bench/hotgauge_bench_match
+	$(BUILD)/tests/bench/hotgauge_bench_acquire
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')

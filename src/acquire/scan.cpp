@@ -65,22 +65,22 @@ void ScanBuilder::add(const Frame& f) {
         refuse("timestamp " + std::to_string(t0) + " ns does not follow the previous profile");
         return;
     }
-    std::vector<StripePoint> points;
+    std::vector<StripePoint>& points = points_;
     if (peaks) {
         if (f.bytes_per_pixel != 2 || f.height < config_.peaks.frame_rows()) {
             refuse("peaks frame is not Mono16 with " + std::to_string(config_.peaks.frame_rows()) +
                    " rows");
             return;
         }
-        std::vector<std::uint16_t> words(f.data.size() / 2);
-        std::memcpy(words.data(), f.data.data(), words.size() * 2);
-        points = decode_peaks(words.data(), f.width, config_.peaks);
+        words_.resize(f.data.size() / 2);
+        std::memcpy(words_.data(), f.data.data(), words_.size() * 2);
+        decode_peaks(words_.data(), f.width, config_.peaks, points);
     } else if (f.bytes_per_pixel == 1) {
         points = extract_stripe(f.data.data(), f.width, f.height, f.width, config_.stripe);
     } else if (f.bytes_per_pixel == 2) {
-        std::vector<std::uint16_t> words(f.data.size() / 2);
-        std::memcpy(words.data(), f.data.data(), words.size() * 2);
-        points = extract_stripe(words.data(), f.width, f.height, f.width, config_.stripe);
+        words_.resize(f.data.size() / 2);
+        std::memcpy(words_.data(), f.data.data(), words_.size() * 2);
+        points = extract_stripe(words_.data(), f.width, f.height, f.width, config_.stripe);
     } else {
         refuse("unsupported pixel size " + std::to_string(f.bytes_per_pixel) + " bytes");
         return;

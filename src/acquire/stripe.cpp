@@ -318,13 +318,20 @@ core::Result<void> check_peak_format(const PeakFormat& format) {
 
 std::vector<StripePoint> decode_peaks(const std::uint16_t* data, int width,
                                       const PeakFormat& format) {
+    std::vector<StripePoint> out;
+    decode_peaks(data, width, format, out);
+    return out;
+}
+
+void decode_peaks(const std::uint16_t* data, int width, const PeakFormat& format,
+                  std::vector<StripePoint>& out) {
     assert(check_peak_format(format).ok());
     assert(width >= 0);
     const auto w = static_cast<std::ptrdiff_t>(width);
     // value · 2^−bits is exact in float: 16 significant bits, a power-of-two scale.
     const float scale = std::ldexp(1.0F, -format.fractional_bits);
     const float inv_intensity_max = 1.0F / static_cast<float>(format.intensity_max_value);
-    std::vector<StripePoint> out(static_cast<std::size_t>(format.profiles_per_frame * w));
+    out.resize(static_cast<std::size_t>(format.profiles_per_frame * w));
     for (int k = 0; k < format.profiles_per_frame; ++k) {
         const std::uint16_t* peak = data + k * format.rows_per_profile() * w;
         const std::uint16_t* second = format.second_peak ? peak + w : nullptr;
@@ -343,7 +350,6 @@ std::vector<StripePoint> decode_peaks(const std::uint16_t* data, int width,
                 profile[i] = {static_cast<float>(peak[i]) * scale, quality, StripeStatus::kOk};
         }
     }
-    return out;
 }
 
 }  // namespace hotgauge::acquire

@@ -188,6 +188,41 @@ ProfilePoint Triangulation::to_camera(double u_px, double v_px) const {
     return {(u_px - m.u0_px) * m.x_pitch_mm * z / m.reference_range_mm, z};
 }
 
+void Triangulation::to_camera(std::span<const StripePoint> profile, double column_offset_px,
+                              double row_offset_px, float* out) const {
+    constexpr float kNaNf = std::numeric_limits<float>::quiet_NaN();
+    const auto* d = std::get_if<DirectBeam>(&model_);
+    if (!d) {
+        for (std::size_t i = 0; i < profile.size(); ++i, out += 2) {
+            const bool ok = profile[i].status == StripeStatus::kOk;
+            const ProfilePoint p = ok ? to_camera(static_cast<double>(i) + column_offset_px,
+                                                  profile[i].row + row_offset_px)
+                                      : ProfilePoint{kNaN, kNaN};
+            out[0] = static_cast<float>(p.x_mm);
+            out[1] = static_cast<float>(p.z_mm);
+        }
+        return;
+    }
+    // Eq. 2 with its constants hoisted: z = ref + k1·x / (k2 − k3·x), x = (v − v0)·pixel.
+    const DirectBeamParams& p = d->p;
+    const double k1 = p.a0_mm * d->sin_b, k2 = p.b0_mm * d->sin_a, k3 = d->sin_ab;
+    const double x_per_z = p.x_pitch_mm / p.reference_range_mm;
+    const double v_lo = -0.5, v_hi = height_ - 0.5, u_hi = width_ - 0.5;
+    for (std::size_t i = 0; i < profile.size(); ++i, out += 2) {
+        const double u = static_cast<double>(i) + column_offset_px;
+        const double v = static_cast<double>(profile[i].row) + row_offset_px;
+        if (profile[i].status != StripeStatus::kOk || !(v >= v_lo && v <= v_hi) || u < -0.5 ||
+            u > u_hi) {
+            out[0] = out[1] = kNaNf;
+            continue;
+        }
+        const double x_img = (v - p.v0_px) * p.pixel_size_mm;
+        const double z = p.reference_range_mm + k1 * x_img / (k2 - x_img * k3);
+        out[0] = static_cast<float>((u - p.u0_px) * x_per_z * z);
+        out[1] = static_cast<float>(z);
+    }
+}
+
 ImagePoint Triangulation::to_image(double x_mm, double z_mm) const {
     constexpr ImagePoint kNone{kNaN, kNaN};
     if (!(z_mm > 0.0) || !std::isfinite(x_mm)) return kNone;
@@ -233,22 +268,12 @@ ImagePoint Triangulation::to_image(double x_mm, double z_mm) const {
 
 void triangulate(const Triangulation& triangulation, std::span<const StripePoint> profile,
                  std::vector<float>& profiles_mm, double column_offset_px, double row_offset_px) {
-    constexpr float kNaNf = std::numeric_limits<float>::quiet_NaN();
     // Grow geometrically: an exact reserve per profile would copy the whole scan every time.
-    if (profiles_mm.capacity() < profiles_mm.size() + 2 * profile.size())
-        profiles_mm.reserve(
-            std::max(2 * profiles_mm.capacity(), profiles_mm.size() + 2 * profile.size()));
-    for (std::size_t i = 0; i < profile.size(); ++i) {
-        if (profile[i].status != StripeStatus::kOk) {
-            profiles_mm.push_back(kNaNf);
-            profiles_mm.push_back(kNaNf);
-            continue;
-        }
-        const ProfilePoint p = triangulation.to_camera(static_cast<double>(i) + column_offset_px,
-                                                       profile[i].row + row_offset_px);
-        profiles_mm.push_back(static_cast<float>(p.x_mm));
-        profiles_mm.push_back(static_cast<float>(p.z_mm));
-    }
+    const std::size_t first = profiles_mm.size();
+    if (profiles_mm.capacity() < first + 2 * profile.size())
+        profiles_mm.reserve(std::max(2 * profiles_mm.capacity(), first + 2 * profile.size()));
+    profiles_mm.resize(first + 2 * profile.size());
+    triangulation.to_camera(profile, column_offset_px, row_offset_px, profiles_mm.data() + first);
 }
 
 core::Result<CalibrationFit> fit_calibrated_model(std::span<const CalibrationSample> samples,

@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "hotgauge/acquire/camera.hpp"
 #include "hotgauge/acquire/stripe.hpp"
@@ -56,6 +57,9 @@ class ScanBuilder {
     core::FaceScan face_;
     ScanStats stats_;
     std::int64_t t_first_ns_ = 0;
+    // Per-frame buffers, reused: a stream of frames allocates nothing after the first.
+    std::vector<std::uint16_t> words_;
+    std::vector<StripePoint> points_;
 };
 
 }  // namespace hotgauge::acquire

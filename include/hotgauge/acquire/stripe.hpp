@@ -75,5 +75,8 @@ core::Result<void> check_peak_format(const PeakFormat& format);
 // kDoublePeak (the camera cannot tell the laser from its reflection); first peak 0: kNoReturn.
 std::vector<StripePoint> decode_peaks(const std::uint16_t* data, int width,
                                       const PeakFormat& format);
+// The same into `out` (resized), so that a stream of frames reuses one buffer.
+void decode_peaks(const std::uint16_t* data, int width, const PeakFormat& format,
+                  std::vector<StripePoint>& out);
 
 }  // namespace hotgauge::acquire

@@ -60,6 +60,11 @@ class Triangulation {
 
     ProfilePoint to_camera(double u_px, double v_px) const;
     ImagePoint to_image(double x_mm, double z_mm) const;
+    // One profile at once (what triangulate() runs on): point i is column i + column_offset_px,
+    // out gets x, z per point (NaN, NaN unless kOk or outside the field). Same values as
+    // to_camera, without its per-point dispatch.
+    void to_camera(std::span<const StripePoint> profile, double column_offset_px,
+                   double row_offset_px, float* out_xz) const;
 
     int width_px() const { return width_; }
     int height_px() const { return height_; }
