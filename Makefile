@@ -58,6 +58,7 @@ bench: build
 	$(BUILD)/tests/bench/hotgauge_bench
 	$(BUILD)/tests/bench/hotgauge_bench_match
 	$(BUILD)/tests/bench/hotgauge_bench_acquire
+	$(BUILD)/tests/bench/hotgauge_bench_plc
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')

@@ -74,6 +74,18 @@ PY
 "$bin" measure "$tmp/offline" --json > "$tmp/offline.json" 2> /dev/null
 
 validator="$src/../shared/tools/validate-recording"
+# check_and_compare MODE: the grabbed recording is valid, its accelerometer record whole, and
+# its dimensions those of the offline path.
+check_and_compare() {
+  local m=$1
+  cat "$tmp/$m.grab" "$tmp/$m.out"
+  grep -q "(0 gaps, 0 missing)" "$tmp/$m.grab" || fail "$m: accelerometer record has gaps"
+  if [ -f "$validator" ]; then
+    $py "$validator" "$tmp/$m" > /dev/null || fail "validator rejected the $m recording"
+  fi
+  "$bin" measure "$tmp/$m" --json > "$tmp/$m.json" 2> /dev/null || true
+  compare "$tmp/offline.json" "$tmp/$m.json" "$m" || fail "$m mode dimensions"
+}
 grab_common=(--camera "$addr" --temperature "$temp" --timeout-ms 500)
 
 # Peaks mode: 10 profiles of 2048 Mono16 peaks per frame, 1 kHz lines, 100 mm/s.
@@ -84,11 +96,7 @@ serve peaks --mode peaks --accel-to "127.0.0.1:$port"
   --accel "udp://127.0.0.1:$port" --out "$tmp/peaks" > "$tmp/peaks.grab" 2> "$tmp/peaks.grab.err" \
   || fail "peaks grab: $(cat "$tmp/peaks.grab" "$tmp/peaks.grab.err")"
 stop_serving
-cat "$tmp/peaks.grab" "$tmp/peaks.out"
-grep -q "(0 gaps, 0 missing)" "$tmp/peaks.grab" || fail "peaks: accelerometer record has gaps"
-[ -f "$validator" ] && { $py "$validator" "$tmp/peaks" > /dev/null || fail "validator: peaks recording"; }
-"$bin" measure "$tmp/peaks" --json > "$tmp/peaks.json" 2> /dev/null || true
-compare "$tmp/offline.json" "$tmp/peaks.json" peaks || fail "peaks mode dimensions"
+check_and_compare peaks
 
 # Image mode: Mono8 stripe images of sensor rows 320..863 (z ≈ 845..935 mm), 40 frames/s at
 # 24 mm/s (0.6 mm profiles), exposure from the temperature table.
@@ -96,14 +104,11 @@ port=$(free_udp_port)
 serve image --mode image --speed-mm-s 24 --accel-to "127.0.0.1:$port"
 "$bin" grab "${grab_common[@]}" --mode image --width 2048 --height 544 --offset-y 320 \
   --pixel-format Mono8 --max-value 255 --exposure-table 20:400,700:200,1000:100,1200:50 \
-  --frame-rate 40 --speed-mm-s 24 --seconds 10 --accel "udp://127.0.0.1:$port" --out "$tmp/image" > "$tmp/image.grab" \
-  2> "$tmp/image.grab.err" || fail "image grab: $(cat "$tmp/image.grab" "$tmp/image.grab.err")"
+  --frame-rate 40 --speed-mm-s 24 --seconds 10 --accel "udp://127.0.0.1:$port" \
+  --out "$tmp/image" > "$tmp/image.grab" 2> "$tmp/image.grab.err" || fail "image grab: $(cat "$tmp/image.grab" "$tmp/image.grab.err")"
 stop_serving
-cat "$tmp/image.grab" "$tmp/image.out"
 grep -q "exposure 100.0 µs for 1000 °C (table)" "$tmp/image.grab.err" || fail "exposure table not applied"
-[ -f "$validator" ] && { $py "$validator" "$tmp/image" > /dev/null || fail "validator: image recording"; }
-"$bin" measure "$tmp/image" --json > "$tmp/image.json" 2> /dev/null || true
-compare "$tmp/offline.json" "$tmp/image.json" image || fail "image mode dimensions"
+check_and_compare image
 
 # 1 % of the GVSP packets dropped on the link: resend recovers every one, no profile is lost.
 serve lossy --mode peaks --packet-loss 0.01

@@ -14,5 +14,6 @@ Command add_table1(CLI::App& app);
 Command add_fit(CLI::App& app);
 Command add_model(CLI::App& app);
 Command add_grab(CLI::App& app);
+Command add_plc(CLI::App& app);
 
 }  // namespace hotgauge::app

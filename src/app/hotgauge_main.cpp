@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
     add(hotgauge::app::add_fit);
     add(hotgauge::app::add_model);
     add(hotgauge::app::add_grab);
+    add(hotgauge::app::add_plc);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

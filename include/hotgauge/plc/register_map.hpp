@@ -1,0 +1,122 @@
+#pragma once
+// The Modbus register map of the PLC interface (docs/plc-modbus.md), as constants and as data:
+// the docs' tables are printed from `map_markdown()` (`hotgauge plc map`) and a test checks that
+// the docs contain them verbatim, so code and docs cannot drift apart.
+//
+// Addresses are 0-based PDU addresses (what goes on the wire); the docs also give the
+// 40001/30001-style numbers. Every 32-bit value spans two registers in the configured word order;
+// the bytes inside a register are big-endian as Modbus defines.
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+
+namespace hotgauge::plc {
+
+inline constexpr std::uint16_t kMapVersion = 1;
+inline constexpr int kMaxFeatures = 16;
+
+// Holding registers: 0..5 are written by the PLC (the only writable block); the input registers
+// are mirrored read-only at kMirrorBase + address for PLCs that only read holding registers.
+namespace hr {
+inline constexpr std::uint16_t kCommand = 0;     // Command; reads back 0 once taken
+inline constexpr std::uint16_t kPartId = 1;      // uint32, 2 registers
+inline constexpr std::uint16_t kRecipeSlot = 3;  // 1..65535
+inline constexpr std::uint16_t kFace = 4;        // Face
+inline constexpr std::uint16_t kPlcHeartbeat = 5;
+inline constexpr std::uint16_t kWritableCount = 6;
+inline constexpr std::uint16_t kMirrorBase = 100;
+}  // namespace hr
+
+// Input registers (read-only): status, then one block per feature slot.
+namespace ir {
+inline constexpr std::uint16_t kHeartbeat = 0;      // +1 every heartbeat period, wraps
+inline constexpr std::uint16_t kState = 1;          // State
+inline constexpr std::uint16_t kErrorCode = 2;      // fault code while FAULT, else 0
+inline constexpr std::uint16_t kCommandStatus = 3;  // 0 accepted, else why the last was refused
+inline constexpr std::uint16_t kCommandCount = 4;   // commands taken (accepted or refused), wraps
+inline constexpr std::uint16_t kSequence = 5;       // +1 on every DONE, wraps
+inline constexpr std::uint16_t kPartId = 6;         // uint32 echo of the cycle's part id
+inline constexpr std::uint16_t kRecipeSlot = 8;
+inline constexpr std::uint16_t kFace = 9;
+inline constexpr std::uint16_t kPlcHeartbeat = 10;  // echo of the PLC's heartbeat
+inline constexpr std::uint16_t kOverallVerdict = 11;
+inline constexpr std::uint16_t kFeatureCount = 12;  // features in the result, 0 when none
+inline constexpr std::uint16_t kTemperature = 13;   // int16, 0.1 °C; kInvalidInt16 if unknown
+inline constexpr std::uint16_t kMapVersionReg = 14;
+inline constexpr std::uint16_t kFeatureBase = 16;
+inline constexpr std::uint16_t kFeatureStride = 6;
+// Offsets inside one feature block.
+inline constexpr std::uint16_t kValueUm = 0;  // int32 µm, kInvalidInt32 if not measured
+inline constexpr std::uint16_t kValueMm = 2;  // float32 mm, NaN if not measured
+inline constexpr std::uint16_t kVerdict = 4;  // Verdict
+inline constexpr std::uint16_t kCount = kFeatureBase + kMaxFeatures * kFeatureStride;  // 112
+
+// First register of feature `slot` (1-based).
+constexpr std::uint16_t feature(int slot) {
+    return static_cast<std::uint16_t>(kFeatureBase + (slot - 1) * kFeatureStride);
+}
+}  // namespace ir
+
+enum class State : std::uint16_t { kIdle = 1, kBusy = 2, kDone = 3, kFault = 4 };
+enum class Command : std::uint16_t { kNone = 0, kTrigger = 1, kAck = 2, kReset = 3 };
+// Per feature: kNone (no result), kOk, kNok, kNotMeasured. Overall: also kDegraded (every
+// feature in tolerance, but the data behind them was degraded: accelerometer gap, stale
+// temperature...; the PLC's policy decides).
+enum class Verdict : std::uint16_t {
+    kNone = 0,
+    kOk = 1,
+    kNok = 2,
+    kNotMeasured = 3,
+    kDegraded = 4
+};
+enum class Face : std::uint16_t { kAll = 0, kTop = 1, kBottom = 2, kSide1 = 3, kSide2 = 4 };
+inline constexpr std::uint16_t kMaxFace = 4;
+
+// Command refusals (command status register) are 1xx; faults (error code register) are 2xx.
+enum class ErrorCode : std::uint16_t {
+    kNone = 0,
+    kBusy = 101,             // trigger while BUSY
+    kNotAcknowledged = 102,  // trigger while DONE: ack the result first
+    kInFault = 103,          // trigger or ack while FAULT: reset first
+    kNothingToAck = 104,     // ack while IDLE or BUSY
+    kUnknownCommand = 105,
+    kBadFace = 106,        // face register above 4
+    kBadRecipeSlot = 107,  // recipe slot 0
+    kMeasurementFailed = 201,
+    kUnknownRecipe = 202,  // no recipe in that slot
+    kDeviceLost = 203,     // camera, accelerometer or pyrometer gone
+    kTimeout = 204,        // the cycle took too long
+    kInternal = 205,       // a bug: an invalid result was published
+};
+
+enum class WordOrder { kBigEndian, kLittleEndian };  // high word first / low word first
+
+const char* to_string(State s);
+const char* to_string(Verdict v);
+const char* to_string(ErrorCode e);
+const char* to_string(WordOrder w);
+std::optional<WordOrder> parse_word_order(std::string_view s);  // "big" or "little"
+
+inline constexpr std::int32_t kInvalidInt32 = INT32_MIN;  // 0x80000000, as profile sensors do
+inline constexpr std::int16_t kInvalidInt16 = INT16_MIN;  // 0x8000
+
+// A 32-bit value as two registers, in the order they appear at increasing addresses.
+std::array<std::uint16_t, 2> encode_u32(std::uint32_t v, WordOrder order);
+std::uint32_t decode_u32(std::uint16_t first, std::uint16_t second, WordOrder order);
+std::array<std::uint16_t, 2> encode_i32(std::int32_t v, WordOrder order);
+std::int32_t decode_i32(std::uint16_t first, std::uint16_t second, WordOrder order);
+std::array<std::uint16_t, 2> encode_f32(float v, WordOrder order);
+float decode_f32(std::uint16_t first, std::uint16_t second, WordOrder order);
+
+// A length in mm as int32 µm (rounded half away from zero); kInvalidInt32 when absent,
+// not finite or out of range (the marker itself is never a value).
+std::int32_t to_um(std::optional<double> value_mm);
+// A temperature as int16 in 0.1 °C; kInvalidInt16 when absent or out of range.
+std::int16_t to_decicelsius(std::optional<double> temperature_c);
+
+// The register tables of docs/plc-modbus.md, generated from the constants above.
+std::string map_markdown();
+
+}  // namespace hotgauge::plc
