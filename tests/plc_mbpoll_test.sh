@@ -19,7 +19,7 @@ fail() { echo "FAIL: $*"; [ -f "$tmp/serve.log" ] && tail -20 "$tmp/serve.log"; 
 
 start_server() {
   rm -f "$tmp/port"
-  "$bin" plc serve --bind 127.0.0.1 --port 0 --port-file "$tmp/port" --busy-ms 200 "$@" \
+  "$bin" plc serve --bind 127.0.0.1 --port 0 --port-file "$tmp/port" --busy-ms 2000 "$@" \
     > "$tmp/serve.log" 2>&1 &
   pid=$!
   for _ in $(seq 1 100); do

@@ -25,6 +25,33 @@ std::int64_t realtime_ns() {
         .count();
 }
 
+// A multi-part buffer's parts into `f` (parts one after the other in f.data); false when a part
+// is missing or not a whole image.
+bool copy_parts(ArvBuffer* b, Frame& f) {
+    const guint n = arv_buffer_get_n_parts(b);
+    if (n == 0) return false;
+    for (guint i = 0; i < n; ++i) {
+        size_t size = 0;
+        const auto* data = static_cast<const std::uint8_t*>(arv_buffer_get_part_data(b, i, &size));
+        FramePart part;
+        part.component = static_cast<int>(arv_buffer_get_part_component_id(b, i));
+        part.width = arv_buffer_get_part_width(b, i);
+        part.height = arv_buffer_get_part_height(b, i);
+        part.bytes_per_pixel = static_cast<int>(
+            (ARV_PIXEL_FORMAT_BIT_PER_PIXEL(arv_buffer_get_part_pixel_format(b, i)) + 7) / 8);
+        part.offset = f.data.size();
+        part.size = static_cast<std::size_t>(part.width) * static_cast<std::size_t>(part.height) *
+                    static_cast<std::size_t>(part.bytes_per_pixel);
+        if (!data || part.width <= 0 || part.height <= 0 || size < part.size) return false;
+        f.data.insert(f.data.end(), data, data + part.size);
+        f.parts.push_back(part);
+    }
+    f.width = f.parts[0].width;
+    f.height = f.parts[0].height;
+    f.bytes_per_pixel = f.parts[0].bytes_per_pixel;
+    return true;
+}
+
 }  // namespace
 
 struct Camera::Impl {
@@ -196,6 +223,18 @@ core::Result<Frame> Camera::next() {
         }
         Frame f;
         f.camera_ns = static_cast<std::int64_t>(arv_buffer_get_timestamp(b));
+        if (arv_buffer_get_payload_type(b) == ARV_BUFFER_PAYLOAD_TYPE_MULTIPART) {
+            if (copy_parts(b, f)) {
+                f.system_ns = realtime_ns();
+                f.frame_id = arv_buffer_get_frame_id(b);
+                arv_stream_push_buffer(impl_->stream, b);
+                ++stats_.frames;
+                return f;
+            }
+            ++stats_.incomplete;
+            arv_stream_push_buffer(impl_->stream, b);
+            continue;
+        }
         f.system_ns = realtime_ns();
         f.frame_id = arv_buffer_get_frame_id(b);
         f.width = arv_buffer_get_image_width(b);

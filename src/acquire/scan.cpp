@@ -66,7 +66,29 @@ void ScanBuilder::add(const Frame& f) {
         return;
     }
     std::vector<StripePoint>& points = points_;
-    if (peaks) {
+    if (peaks && !f.parts.empty()) {
+        // Multi-part: one part per row kind (peak, then second peak / intensity / width as the
+        // format has them), each profiles_per_frame rows; interleaved into the one-frame layout.
+        const int kinds = config_.peaks.rows_per_profile();
+        const int n_profiles = config_.peaks.profiles_per_frame;
+        const auto w = static_cast<std::size_t>(f.width);
+        bool fits = static_cast<int>(f.parts.size()) == kinds;
+        for (const auto& part : f.parts)
+            fits = fits && part.bytes_per_pixel == 2 && part.width == f.width &&
+                   part.height >= n_profiles;
+        if (!fits) {
+            refuse("multi-part peaks frame is not " + std::to_string(kinds) + " Mono16 parts of " +
+                   std::to_string(n_profiles) + " rows");
+            return;
+        }
+        words_.resize(w * static_cast<std::size_t>(kinds * n_profiles));
+        for (int k = 0; k < n_profiles; ++k)
+            for (int j = 0; j < kinds; ++j)
+                std::memcpy(words_.data() + (static_cast<std::size_t>(k * kinds + j)) * w,
+                            f.data.data() + f.parts[j].offset + static_cast<std::size_t>(k) * w * 2,
+                            w * 2);
+        decode_peaks(words_.data(), f.width, config_.peaks, points);
+    } else if (peaks) {
         if (f.bytes_per_pixel != 2 || f.height < config_.peaks.frame_rows()) {
             refuse("peaks frame is not Mono16 with " + std::to_string(config_.peaks.frame_rows()) +
                    " rows");

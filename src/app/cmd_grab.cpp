@@ -274,6 +274,8 @@ Command add_grab(CLI::App& app) {
     s->add_option("--profiles-per-frame", a->scan.peaks.profiles_per_frame,
                   "peaks mode: profiles per frame")
         ->capture_default_str();
+    s->add_flag("--intensity", a->scan.peaks.intensity,
+                "peaks mode: an intensity row (or part) follows each profile's peak row");
     s->add_option("--peak-row-offset", a->peak_row_offset,
                   "peaks mode: first sensor row of the camera's window")
         ->capture_default_str();

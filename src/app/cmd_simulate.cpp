@@ -31,6 +31,7 @@ struct SimulateArgs {
     vcell::VirtualCellConfig vc;
     double line_rate_hz = 1000.0;
     double seconds = 0.0;
+    bool multipart = false;
 };
 
 // Serves the virtual cell until SIGINT/SIGTERM (or --seconds), then prints what it sent.
@@ -40,6 +41,10 @@ int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cel
     a.vc.cell = cell;
     a.vc.part = opt;
     a.vc.line_period_s = 1.0 / a.line_rate_hz;
+    if (a.multipart) {
+        a.vc.peaks.intensity = true;
+        a.vc.device.multipart_parts = a.vc.peaks.rows_per_profile();
+    }
     // Signals are taken by sigtimedwait below: block them before any thread starts.
     sigset_t signals;
     sigemptyset(&signals);
@@ -203,6 +208,9 @@ Command add_simulate(CLI::App& app) {
     s->add_option("--packet-loss", a->vc.device.packet_loss,
                   "serve: fraction of GVSP packets the link drops (resend recovers them)")
         ->capture_default_str();
+    s->add_flag("--intensity", a->vc.peaks.intensity, "serve: peaks mode sends an intensity row");
+    s->add_flag("--multipart", a->multipart,
+                "serve: peaks mode sends range and intensity as parts of one multi-part buffer");
     s->add_option("--seconds", a->seconds, "serve: stop after this long (0: at SIGINT/SIGTERM)")
         ->capture_default_str();
     return [a] { return run(*a); };

@@ -44,8 +44,12 @@ constexpr std::size_t kMaxReadMemory = 536;  // GVCP's limit per READMEM
 // Stream protocol (GVSP): packet formats, image payload type, and the IP + UDP + GVSP header
 // bytes that the packet size register includes.
 constexpr std::uint8_t kGvspLeader = 0x01, kGvspTrailer = 0x02, kGvspPayload = 0x03;
-constexpr std::uint16_t kPayloadImage = 0x0001;
+constexpr std::uint8_t kGvspMultipart = 0x07;
+constexpr std::uint16_t kPayloadImage = 0x0001, kPayloadMultipart = 0x000a;
+constexpr std::uint16_t kPartData2dImage = 0x0001;
 constexpr int kGvspOverheadBytes = 20 + 8 + 8;
+// Extended ids: IP + UDP + the 20-byte extended header + the 8-byte part header of each packet.
+constexpr int kGvspMultipartOverheadBytes = 20 + 8 + 20 + 8;
 
 void put16(std::vector<std::uint8_t>& b, std::uint32_t v) {
     b.push_back(static_cast<std::uint8_t>(v >> 8));
@@ -79,6 +83,124 @@ std::vector<std::uint8_t> gvsp_header(std::uint16_t block_id, std::uint8_t forma
     put16(b, block_id);
     put32(b, static_cast<std::uint32_t>(format) << 24 | (packet_id & 0xffffff));
     return b;
+}
+
+// One image payload (GVSP payload type 0x0001), standard ids: leader, data, trailer.
+std::vector<std::vector<std::uint8_t>> image_packets(const FrameRequest& req,
+                                                     std::uint32_t packet_size,
+                                                     const std::vector<std::uint8_t>& data) {
+    const std::size_t chunk = packet_size - kGvspOverheadBytes;
+    const auto block = static_cast<std::uint16_t>(req.frame_id);
+    std::vector<std::vector<std::uint8_t>> packets;
+    std::uint32_t packet_id = 0;
+    auto leader = gvsp_header(block, kGvspLeader, packet_id++);
+    put16(leader, 0);  // flags
+    put16(leader, kPayloadImage);
+    const auto ts = static_cast<std::uint64_t>(req.timestamp_ns);
+    put32(leader, static_cast<std::uint32_t>(ts >> 32));
+    put32(leader, static_cast<std::uint32_t>(ts & 0xffffffffu));
+    put32(leader, req.pixel_format);
+    put32(leader, static_cast<std::uint32_t>(req.width));
+    put32(leader, static_cast<std::uint32_t>(req.height));
+    put32(leader, static_cast<std::uint32_t>(req.offset_x));
+    put32(leader, static_cast<std::uint32_t>(req.offset_y));
+    put16(leader, 0);  // padding x
+    put16(leader, 0);  // padding y
+    packets.push_back(std::move(leader));
+    for (std::size_t offset = 0; offset < data.size(); offset += chunk) {
+        auto p = gvsp_header(block, kGvspPayload, packet_id++);
+        const std::size_t n = std::min(chunk, data.size() - offset);
+        p.insert(p.end(), data.begin() + static_cast<std::ptrdiff_t>(offset),
+                 data.begin() + static_cast<std::ptrdiff_t>(offset + n));
+        packets.push_back(std::move(p));
+    }
+    auto trailer = gvsp_header(block, kGvspTrailer, packet_id++);
+    put16(trailer, 0);
+    put16(trailer, kPayloadImage);
+    put32(trailer, static_cast<std::uint32_t>(req.height));
+    packets.push_back(std::move(trailer));
+    return packets;
+}
+
+// GigE Vision 2.1 extended-id header: status, flags, EI bit + format + (leader) part count,
+// 64-bit block id, 32-bit packet id.
+std::vector<std::uint8_t> gvsp_extended_header(std::uint64_t block_id, std::uint8_t format,
+                                               std::uint32_t low_byte, std::uint32_t packet_id) {
+    std::vector<std::uint8_t> b;
+    put16(b, 0);  // status: success
+    put16(b, 0);  // flags
+    put32(b, 0x80000000u | static_cast<std::uint32_t>(format) << 24 | (low_byte & 0xff));
+    put32(b, static_cast<std::uint32_t>(block_id >> 32));
+    put32(b, static_cast<std::uint32_t>(block_id & 0xffffffffu));
+    put32(b, packet_id);
+    return b;
+}
+
+// A multi-part payload (type 0x000A), as 3D sensors send range and intensity: the frame's rows
+// split into `n_parts` equal parts, each a 2D image part; extended ids (Aravis reads the part
+// count from the leader's low byte, which standard ids would take for the packet id).
+std::vector<std::vector<std::uint8_t>> multipart_packets(const FrameRequest& req,
+                                                         std::uint32_t packet_size,
+                                                         const std::vector<std::uint8_t>& data,
+                                                         int n_parts) {
+    const std::size_t chunk = packet_size - kGvspMultipartOverheadBytes;
+    const std::uint64_t block = req.frame_id;
+    const int part_rows = req.height / n_parts;
+    const std::size_t part_bytes = static_cast<std::size_t>(req.width) *
+                                   static_cast<std::size_t>(part_rows) *
+                                   static_cast<std::size_t>(std::max(1, req.bytes_per_pixel));
+    std::vector<std::vector<std::uint8_t>> packets;
+    std::uint32_t packet_id = 0;
+    auto leader =
+        gvsp_extended_header(block, kGvspLeader, static_cast<std::uint32_t>(n_parts), packet_id++);
+    put16(leader, 0);  // flags
+    put16(leader, kPayloadMultipart);
+    const auto ts = static_cast<std::uint64_t>(req.timestamp_ns);
+    put32(leader, static_cast<std::uint32_t>(ts >> 32));
+    put32(leader, static_cast<std::uint32_t>(ts & 0xffffffffu));
+    for (int i = 0; i < n_parts; ++i) {  // 48 bytes of part description each
+        put16(leader, kPartData2dImage);
+        put16(leader, 0);  // part length, high 16 bits
+        put32(leader, static_cast<std::uint32_t>(part_bytes));
+        put32(leader, req.pixel_format);
+        put16(leader, 0);                              // reserved
+        leader.push_back(0);                           // source id
+        leader.push_back(0);                           // additional zones
+        put32(leader, 0);                              // zone directions
+        put16(leader, static_cast<std::uint32_t>(i));  // data purpose id: the component
+        put16(leader, 0);                              // region id
+        put32(leader, static_cast<std::uint32_t>(req.width));
+        put32(leader, static_cast<std::uint32_t>(part_rows));
+        put32(leader, static_cast<std::uint32_t>(req.offset_x));
+        put32(leader, static_cast<std::uint32_t>(req.offset_y));
+        put16(leader, 0);  // padding x
+        put16(leader, 0);  // padding y
+        put32(leader, 0);  // reserved
+    }
+    packets.push_back(std::move(leader));
+    for (int i = 0; i < n_parts; ++i) {
+        const std::size_t base = static_cast<std::size_t>(i) * part_bytes;
+        for (std::size_t offset = 0; offset < part_bytes && base + offset < data.size();
+             offset += chunk) {
+            auto p = gvsp_extended_header(block, kGvspMultipart, 0, packet_id++);
+            const std::size_t n =
+                std::min({chunk, part_bytes - offset, data.size() - base - offset});
+            const std::uint64_t at = base + offset;     // where the bytes go in the whole buffer
+            p.push_back(static_cast<std::uint8_t>(i));  // part id
+            p.push_back(0);                             // zone info
+            put16(p, static_cast<std::uint32_t>(at >> 32));
+            put32(p, static_cast<std::uint32_t>(at & 0xffffffffu));
+            p.insert(p.end(), data.begin() + static_cast<std::ptrdiff_t>(at),
+                     data.begin() + static_cast<std::ptrdiff_t>(at + n));
+            packets.push_back(std::move(p));
+        }
+    }
+    auto trailer = gvsp_extended_header(block, kGvspTrailer, 0, packet_id++);
+    put16(trailer, 0);
+    put16(trailer, kPayloadMultipart);
+    put32(trailer, 0);
+    packets.push_back(std::move(trailer));
+    return packets;
 }
 
 std::int64_t real_time_us() { return g_get_real_time(); }
@@ -411,37 +533,10 @@ void GvDevice::Impl::run_stream() {
 void GvDevice::Impl::send_frame(const FrameRequest& req, std::uint32_t packet_size,
                                 const std::vector<std::uint8_t>& data, std::mt19937_64& loss_rng) {
     if (packet_size < 576 || packet_size > 16000) packet_size = 1500;
-    const std::size_t chunk = packet_size - kGvspOverheadBytes;
     const auto block = static_cast<std::uint16_t>(req.frame_id);
-    SentFrame frame{block, {}};
-    std::uint32_t packet_id = 0;
-
-    auto leader = gvsp_header(block, kGvspLeader, packet_id++);
-    put16(leader, 0);  // flags
-    put16(leader, kPayloadImage);
-    const auto ts = static_cast<std::uint64_t>(req.timestamp_ns);
-    put32(leader, static_cast<std::uint32_t>(ts >> 32));
-    put32(leader, static_cast<std::uint32_t>(ts & 0xffffffffu));
-    put32(leader, req.pixel_format);
-    put32(leader, static_cast<std::uint32_t>(req.width));
-    put32(leader, static_cast<std::uint32_t>(req.height));
-    put32(leader, static_cast<std::uint32_t>(req.offset_x));
-    put32(leader, static_cast<std::uint32_t>(req.offset_y));
-    put16(leader, 0);  // padding x
-    put16(leader, 0);  // padding y
-    frame.packets.push_back(std::move(leader));
-    for (std::size_t offset = 0; offset < data.size(); offset += chunk) {
-        auto p = gvsp_header(block, kGvspPayload, packet_id++);
-        const std::size_t n = std::min(chunk, data.size() - offset);
-        p.insert(p.end(), data.begin() + static_cast<std::ptrdiff_t>(offset),
-                 data.begin() + static_cast<std::ptrdiff_t>(offset + n));
-        frame.packets.push_back(std::move(p));
-    }
-    auto trailer = gvsp_header(block, kGvspTrailer, packet_id++);
-    put16(trailer, 0);
-    put16(trailer, kPayloadImage);
-    put32(trailer, static_cast<std::uint32_t>(req.height));
-    frame.packets.push_back(std::move(trailer));
+    SentFrame frame{block, config.multipart_parts >= 2
+                               ? multipart_packets(req, packet_size, data, config.multipart_parts)
+                               : image_packets(req, packet_size, data)};
 
     std::uint64_t dropped = 0;
     std::bernoulli_distribution drop(config.packet_loss);

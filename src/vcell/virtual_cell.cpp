@@ -37,7 +37,7 @@ struct VirtualCell::Impl {
     // Stream thread (the device's renderer) only.
     sim::RandomStream render_rng{0};
     std::vector<sim::RayReturn> returns;
-    std::vector<std::uint16_t> words;
+    std::vector<std::uint16_t> words, profile_rows;
     std::uint64_t acquisition = 0;
     std::int64_t t_scan_start_ns = 0;
     bool warned_format = false;
@@ -102,11 +102,21 @@ void VirtualCell::Impl::render(const FrameRequest& req, std::span<std::uint8_t> 
     const auto w = static_cast<std::size_t>(req.width);
     words.assign(w * static_cast<std::size_t>(req.height), 0);
     const auto period_ns = static_cast<std::int64_t>(std::llround(config.line_period_s * 1e9));
+    const bool multipart = config.device.multipart_parts >= 2;
+    profile_rows.resize(w * static_cast<std::size_t>(rpp));
     for (int k = 0; k < profiles; ++k) {
         const std::int64_t t = req.timestamp_ns + k * period_ns;
         scene->cast_profile(*face, sensor_origin(t), render_rng, returns);
         render_peaks(returns, *triangulation, config.peaks, req.width, req.offset_x,
-                     config.peak_row_offset, words.data() + static_cast<std::size_t>(k * rpp) * w);
+                     config.peak_row_offset, profile_rows.data());
+        // One frame: the profile's rows together; multi-part: row kind j of every profile in
+        // part j (range, then intensity, ...).
+        for (int j = 0; j < rpp; ++j) {
+            const std::size_t row = multipart ? static_cast<std::size_t>(j * profiles + k)
+                                              : static_cast<std::size_t>(k * rpp + j);
+            std::memcpy(words.data() + row * w,
+                        profile_rows.data() + static_cast<std::size_t>(j) * w, w * 2);
+        }
     }
     std::memcpy(data.data(), words.data(), std::min(data.size(), words.size() * 2));
 }
@@ -169,6 +179,11 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
     if (!impl->face) return core::make_error("virtual cell: no face '" + c.face + "' in the cell");
     if (c.mode == "peaks")
         if (auto ok = acquire::check_peak_format(c.peaks); !ok) return ok.error();
+    if (c.device.multipart_parts >= 2 &&
+        (c.mode != "peaks" || c.device.multipart_parts != c.peaks.rows_per_profile()))
+        return core::make_error(
+            "virtual cell: multi-part frames need peaks mode with one part per row kind (" +
+            std::to_string(c.peaks.rows_per_profile()) + ")");
     if (!(c.speed_mm_s > 0)) return core::make_error("virtual cell: speed_mm_s must be > 0");
     if (!(c.cell.accel.rate_hz > 0))
         return core::make_error("virtual cell: accelerometer rate must be > 0");

@@ -42,6 +42,15 @@ struct StreamStats {
     std::uint64_t missing_frames = 0, missing_packets = 0, resend_requests = 0, resent_packets = 0;
 };
 
+// One part of a multi-part buffer (GigE Vision 2.1: range and intensity of a 3D sensor as
+// separate parts), read through Aravis's buffer-part API.
+struct FramePart {
+    int component = 0;  // the part's data purpose / component id
+    int width = 0, height = 0;
+    int bytes_per_pixel = 1;
+    std::size_t offset = 0, size = 0;  // where its bytes are in Frame::data
+};
+
 // One received buffer, copied out of the pool.
 struct Frame {
     std::int64_t camera_ns = 0;  // the camera's timestamp
@@ -50,6 +59,9 @@ struct Frame {
     int width = 0, height = 0;
     int bytes_per_pixel = 1;
     std::vector<std::uint8_t> data;  // width × height × bytes_per_pixel, row-major
+    // Multi-part buffers: the parts, their bytes one after the other in `data`; width and height
+    // above are then those of part 0. Empty for a plain image.
+    std::vector<FramePart> parts;
 };
 
 class Camera {

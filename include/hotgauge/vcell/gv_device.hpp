@@ -40,6 +40,10 @@ struct GvDeviceConfig {
     double packet_loss = 0.0;       // fraction of first transmissions the link drops
     std::uint64_t loss_seed = 1;    // the drops are reproducible
     int resend_buffer_frames = 64;  // frames kept for PACKETRESEND
+    // ≥ 2: each frame goes out as a GVSP multi-part payload, its rows split into this many equal
+    // parts (range, intensity, ... as 3D sensors send them); the renderer writes them one after
+    // the other.
+    int multipart_parts = 0;
 };
 
 struct GvDeviceStats {
