@@ -1,0 +1,239 @@
+#include "hotgauge/results/results_log.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <ctime>
+#include <nlohmann/json.hpp>
+
+#include "hotgauge/core/log.hpp"
+
+namespace hotgauge::results {
+namespace {
+
+spdlog::logger& log() {
+    static const auto logger = core::module_logger("results");
+    return *logger;
+}
+
+std::string errno_text(int e) { return std::strerror(e); }
+
+// RFC 4180: quoted when it holds a comma, a quote or a line break; quotes doubled.
+std::string cell(const std::string& s) {
+    if (s.find_first_of(",\"\r\n") == std::string::npos) return s;
+    std::string out = "\"";
+    for (char c : s) {
+        if (c == '"') out += '"';
+        out += c;
+    }
+    return out + "\"";
+}
+
+std::string number(const std::optional<double>& v, int decimals) {
+    if (!v || !std::isfinite(*v)) return "";
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.*f", decimals, *v);
+    return buf;
+}
+
+std::tm local_tm(std::int64_t time_ns) {
+    const std::time_t secs = static_cast<std::time_t>(time_ns / 1'000'000'000);
+    std::tm tm{};
+    localtime_r(&secs, &tm);
+    return tm;
+}
+
+}  // namespace
+
+std::string local_iso8601(std::int64_t time_ns) {
+    const std::tm tm = local_tm(time_ns);
+    char date[32], zone[8];
+    std::strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%S", &tm);
+    std::strftime(zone, sizeof zone, "%z", &tm);  // +0100
+    const std::string z(zone);
+    const long ms = static_cast<long>((time_ns / 1'000'000) % 1000);
+    char out[64];
+    std::snprintf(out, sizeof out, "%s.%03ld%s:%s", date, ms, z.substr(0, 3).c_str(),
+                  z.substr(3).c_str());
+    return out;
+}
+
+std::string local_date(std::int64_t time_ns) {
+    const std::tm tm = local_tm(time_ns);
+    char date[16];
+    std::strftime(date, sizeof date, "%Y-%m-%d", &tm);
+    return date;
+}
+
+std::string csv_header(const pipeline::PartResult& r) {
+    std::string h = "time,sequence,part_id,recipe,temperature_c,verdict,degraded";
+    for (const auto& f : r.measurement.features) {
+        h += "," + cell(f.name + " value_mm");
+        h += "," + cell(f.name + " deviation_mm");
+        h += "," + cell(f.name + " verdict");
+    }
+    return h;
+}
+
+std::string csv_row(const ResultEntry& e) {
+    const auto& r = *e.result;
+    const auto& m = r.measurement;
+    std::string row = local_iso8601(e.time_ns) + "," + std::to_string(e.sequence) + "," +
+                      cell(r.part_id) + "," + cell(r.recipe) + "," + number(m.temperature_c, 1) +
+                      "," + measure::to_string(m.verdict) + "," + (r.degraded ? "yes" : "no");
+    for (const auto& f : m.features) {
+        // The value a quality engineer compares with the drawing: cold, in mm.
+        row += "," + number(f.cold_mm, 4) + "," + number(f.deviation_mm, 4) + "," +
+               measure::to_string(f.verdict);
+    }
+    return row;
+}
+
+std::string jsonl_line(const ResultEntry& e) {
+    nlohmann::json j;
+    j["time"] = local_iso8601(e.time_ns);
+    j["time_ns"] = e.time_ns;
+    j["sequence"] = e.sequence;
+    j["software_version"] = e.software_version;
+    j["config_hash"] = e.config_hash;
+    j["archived_as"] = e.archived_as ? nlohmann::json(*e.archived_as) : nlohmann::json();
+    j["part"] = nlohmann::json::parse(pipeline::to_json(*e.result));
+    return j.dump();  // one line: no indentation, line breaks in strings escaped
+}
+
+core::Result<ResultsLog> ResultsLog::open(const ResultsConfig& config) {
+    std::error_code ec;
+    std::filesystem::create_directories(config.dir, ec);
+    if (ec)
+        return core::make_error(config.dir.string() +
+                                ": cannot create the results folder: " + ec.message());
+    return ResultsLog(config);
+}
+
+ResultsLog::ResultsLog(ResultsLog&& o) noexcept
+    : config_(std::move(o.config_)),
+      files_(std::move(o.files_)),
+      last_csv_(std::move(o.last_csv_)),
+      last_jsonl_(std::move(o.last_jsonl_)) {
+    o.files_.clear();
+}
+
+ResultsLog& ResultsLog::operator=(ResultsLog&& o) noexcept {
+    if (this != &o) {
+        close_all();
+        config_ = std::move(o.config_);
+        files_ = std::move(o.files_);
+        last_csv_ = std::move(o.last_csv_);
+        last_jsonl_ = std::move(o.last_jsonl_);
+        o.files_.clear();
+    }
+    return *this;
+}
+
+ResultsLog::~ResultsLog() { close_all(); }
+
+void ResultsLog::close_all() {
+    for (auto& [path, f] : files_)
+        if (f.fd >= 0) ::close(f.fd);
+    files_.clear();
+}
+
+// Opens a day file for appending. A last line without its line break (the power went during a
+// write) is cut off here, so every line in the file is whole.
+core::Result<ResultsLog::OpenFile*> ResultsLog::file(const std::filesystem::path& path) {
+    if (auto it = files_.find(path); it != files_.end()) return &it->second;
+    // One file per day and kind: close yesterday's.
+    if (files_.size() > 8) close_all();
+    const bool existed = std::filesystem::exists(path);
+    const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+    if (fd < 0) return core::make_error(path.string() + ": " + errno_text(errno));
+    OpenFile f{fd, {}};
+    struct stat st {};
+    if (::fstat(fd, &st) == 0 && st.st_size > 0) {
+        // The header is the first line; a torn tail is whatever follows the last '\n'.
+        std::string text(static_cast<std::size_t>(st.st_size), '\0');
+        if (::pread(fd, text.data(), text.size(), 0) == static_cast<ssize_t>(text.size())) {
+            const auto last_nl = text.rfind('\n');
+            const auto keep = last_nl == std::string::npos ? 0 : last_nl + 1;
+            if (keep < text.size()) {
+                log().warn("{}: cut a torn last line of {} bytes (a write was interrupted)",
+                           path.string(), text.size() - keep);
+                if (::ftruncate(fd, static_cast<off_t>(keep)) != 0) {
+                    const int e = errno;
+                    ::close(fd);
+                    return core::make_error(path.string() + ": cannot repair: " + errno_text(e));
+                }
+            }
+            const auto first_nl = text.find('\n');
+            if (first_nl != std::string::npos && first_nl < keep)
+                f.header = text.substr(0, first_nl);
+        }
+    }
+    if (!existed && config_.sync) {  // the new name must survive a power cut too
+        const int dir = ::open(path.parent_path().c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        if (dir >= 0) {
+            ::fsync(dir);
+            ::close(dir);
+        }
+    }
+    return &files_.emplace(path, std::move(f)).first->second;
+}
+
+core::Result<void> ResultsLog::write_line(OpenFile& f, const std::filesystem::path& path,
+                                          const std::string& line) {
+    const std::string data = line + "\n";
+    struct stat st {};
+    const off_t before = ::fstat(f.fd, &st) == 0 ? st.st_size : -1;
+    std::size_t done = 0;
+    while (done < data.size()) {
+        const ssize_t n = ::write(f.fd, data.data() + done, data.size() - done);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) {
+            const int e = n < 0 ? errno : ENOSPC;
+            // Never leave half a line: back to where this line started.
+            if (before >= 0 && ::ftruncate(f.fd, before) != 0)
+                log().error("{}: could not cut back a partial line: {}", path.string(),
+                            errno_text(errno));
+            return core::make_error(path.string() + ": " + errno_text(e));
+        }
+        done += static_cast<std::size_t>(n);
+    }
+    if (config_.sync && ::fdatasync(f.fd) != 0)
+        return core::make_error(path.string() + ": not stored durably: " + errno_text(errno));
+    return {};
+}
+
+core::Result<void> ResultsLog::append(const ResultEntry& e) {
+    if (!e.result) return core::make_error("results: an entry without a result");
+    const std::string date = local_date(e.time_ns);
+    const std::string header = csv_header(*e.result);
+    std::filesystem::path csv = config_.dir / (date + ".csv");
+    auto f = file(csv);
+    if (!f) return f.error();
+    if (!(*f)->header.empty() && (*f)->header != header) {
+        // Another recipe's features: its own file, so that every column keeps one meaning.
+        csv = config_.dir / (date + "." + e.result->recipe + ".csv");
+        f = file(csv);
+        if (!f) return f.error();
+    }
+    if ((*f)->header.empty()) {
+        if (auto ok = write_line(**f, csv, header); !ok) return ok;
+        (*f)->header = header;
+    }
+    // JSON first: if the disk fills between the two, the CSV (what people read) does not show a
+    // part the full record lacks.
+    const std::filesystem::path jsonl = config_.dir / (date + ".jsonl");
+    auto j = file(jsonl);
+    if (!j) return j.error();
+    if (auto ok = write_line(**j, jsonl, jsonl_line(e)); !ok) return ok;
+    if (auto ok = write_line(**f, csv, csv_row(e)); !ok) return ok;
+    last_csv_ = csv;
+    last_jsonl_ = jsonl;
+    return {};
+}
+
+}  // namespace hotgauge::results

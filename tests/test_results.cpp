@@ -1,0 +1,160 @@
+// Results files (docs/results.md): content, spreadsheet-clean CSV (checked by Python's csv
+// module), one JSON object per line, torn-line repair, full disk, recipes with other features.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/resource.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "hotgauge/results/results_log.hpp"
+#include "temp_dir.hpp"
+
+namespace hotgauge {
+namespace {
+
+std::vector<std::string> lines(const std::filesystem::path& p) {
+    std::ifstream in(p);
+    std::vector<std::string> out;
+    for (std::string l; std::getline(in, l);) out.push_back(l);
+    return out;
+}
+
+pipeline::PartResult part(const std::string& id, int n_features, double base_mm) {
+    pipeline::PartResult r;
+    r.part_id = id;
+    r.recipe = n_features == 3 ? "hub-a" : "hub-b";
+    r.captured_at = "2026-11-22T07:00:00Z";
+    r.pose_source = "match";
+    r.measurement.temperature_c = 1012.5;
+    r.measurement.growth = 1.0146;
+    r.measurement.verdict = measure::Verdict::kOk;
+    for (int i = 0; i < n_features; ++i) {
+        measure::FeatureResult f;
+        f.name = "Diameter " + std::to_string(i + 1);
+        f.nominal_mm = base_mm + i;
+        if (i == 1) {  // not measured: empty cells, the reason in the JSON
+            f.verdict = measure::Verdict::kNotMeasured;
+            f.reason = "edge not found, arc 12° < 30°";
+        } else {
+            f.verdict = measure::Verdict::kOk;
+            f.cold_mm = base_mm + i + 0.0123;
+            f.hot_mm = *f.cold_mm * 1.0146;
+            f.deviation_mm = 0.0123;
+        }
+        r.measurement.features.push_back(f);
+    }
+    return r;
+}
+
+constexpr std::int64_t kNoon = 1'795'000'000'000'000'000;  // 2026-11-18, some time of day
+
+TEST(ResultsLog, CsvOpensInASpreadsheetAndJsonLinesCarryEverything) {
+    test::TempDir tmp;
+    auto log = results::ResultsLog::open({tmp.path / "results", true});
+    ASSERT_TRUE(log.ok()) << log.error().message;
+    const auto a = part("A-1", 3, 60.0), b = part("B,\"2\"", 3, 60.0);  // a hostile part id
+    ASSERT_TRUE(log->append({kNoon, 41, &a, "0.1.0", "cfg1234", std::nullopt}).ok());
+    ASSERT_TRUE(log->append({kNoon + 1'000'000'000, 42, &b, "0.1.0", "cfg1234", "archive/x"}).ok());
+    const auto csv = log->last_csv();
+    EXPECT_EQ(csv.filename().string(), results::local_date(kNoon) + ".csv");
+    const auto rows = lines(csv);
+    ASSERT_EQ(rows.size(), 3u);
+    EXPECT_EQ(rows[0].rfind("time,sequence,part_id,recipe,temperature_c,verdict,degraded,", 0), 0u);
+    // An independent reader: every row has the header's columns, the quoted id survives.
+    const std::string check =
+        std::string(HOTGAUGE_PYTHON) +
+        " -c \"import csv,sys; r=list(csv.reader(open(sys.argv[1]))); " +
+        "assert all(len(x)==len(r[0]) for x in r), [len(x) for x in r]; " +
+        "assert r[2][2]=='B,\\\"2\\\"', r[2][2]; " +
+        "assert r[1][7]=='60.0123' and r[1][10]=='' and r[1][12]=='NOT_MEASURED', r[1]\" " +
+        csv.string();
+    EXPECT_EQ(std::system(check.c_str()), 0) << check;
+
+    const auto js = lines(log->last_jsonl());
+    ASSERT_EQ(js.size(), 2u);
+    const auto j = nlohmann::json::parse(js[1]);
+    EXPECT_EQ(j["sequence"], 42);
+    EXPECT_EQ(j["config_hash"], "cfg1234");
+    EXPECT_EQ(j["archived_as"], "archive/x");
+    EXPECT_EQ(j["part"]["part_id"], "B,\"2\"");
+    EXPECT_EQ(j["part"]["features"][1]["reason"], "edge not found, arc 12° < 30°");
+}
+
+TEST(ResultsLog, ATornLastLineIsCutWhenTheFileIsOpenedAgain) {
+    test::TempDir tmp;
+    const auto dir = tmp.path / "results";
+    const auto a = part("A-1", 3, 60.0);
+    {
+        auto log = results::ResultsLog::open({dir, true});
+        ASSERT_TRUE(log.ok());
+        ASSERT_TRUE(log->append({kNoon, 1, &a, "v", "h", std::nullopt}).ok());
+    }
+    const auto csv = dir / (results::local_date(kNoon) + ".csv");
+    const auto jsonl = dir / (results::local_date(kNoon) + ".jsonl");
+    {  // the power went in the middle of the next part's lines
+        std::ofstream(csv, std::ios::app) << "2026-11-18T12:00:01,2,A-2,hub-a,10";
+        std::ofstream(jsonl, std::ios::app) << "{\"time\":\"2026";
+    }
+    auto log = results::ResultsLog::open({dir, true});
+    ASSERT_TRUE(log.ok());
+    ASSERT_TRUE(log->append({kNoon + 2'000'000'000, 2, &a, "v", "h", std::nullopt}).ok());
+    const auto rows = lines(csv);
+    ASSERT_EQ(rows.size(), 3u);  // header, part 1, part 2: the torn row is gone
+    EXPECT_NE(rows[2].find(",2,A-1,"), std::string::npos) << rows[2];
+    for (const auto& l : lines(jsonl)) EXPECT_TRUE(nlohmann::json::accept(l)) << l;
+    EXPECT_EQ(lines(jsonl).size(), 2u);
+}
+
+TEST(ResultsLog, AFullDiskIsAnErrorAndLeavesNoHalfLine) {
+    test::TempDir tmp;
+    const auto dir = tmp.path / "results";
+    const auto a = part("A-1", 3, 60.0);
+    auto log = results::ResultsLog::open({dir, true});
+    ASSERT_TRUE(log.ok());
+    ASSERT_TRUE(log->append({kNoon, 1, &a, "v", "h", std::nullopt}).ok());
+    const auto jsonl = log->last_jsonl();
+    const auto csv = log->last_csv();
+    const auto size_json = std::filesystem::file_size(jsonl);
+    const auto size_csv = std::filesystem::file_size(csv);
+    // The disk "fills": no file may grow past 100 bytes more than the JSON file has now.
+    signal(SIGXFSZ, SIG_IGN);  // the write fails with EFBIG instead of killing the process
+    rlimit old{};
+    getrlimit(RLIMIT_FSIZE, &old);
+    rlimit small = old;
+    small.rlim_cur = static_cast<rlim_t>(size_json + 100);
+    ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
+    auto full = log->append({kNoon + 1'000'000'000, 2, &a, "v", "h", std::nullopt});
+    setrlimit(RLIMIT_FSIZE, &old);
+    ASSERT_FALSE(full.ok());
+    EXPECT_NE(full.error().message.find(jsonl.string()), std::string::npos) << full.error().message;
+    EXPECT_EQ(std::filesystem::file_size(jsonl), size_json);  // nothing half written
+    EXPECT_EQ(std::filesystem::file_size(csv), size_csv);
+    // Space again: the next part is written, and everything before it is still there.
+    ASSERT_TRUE(log->append({kNoon + 2'000'000'000, 2, &a, "v", "h", std::nullopt}).ok());
+    EXPECT_EQ(lines(csv).size(), 3u);
+    EXPECT_EQ(lines(jsonl).size(), 2u);
+}
+
+TEST(ResultsLog, ARecipeWithOtherFeaturesGetsItsOwnCsv) {
+    test::TempDir tmp;
+    auto log = results::ResultsLog::open({tmp.path / "results", false});
+    ASSERT_TRUE(log.ok());
+    const auto a = part("A-1", 3, 60.0), b = part("B-1", 5, 30.0);
+    ASSERT_TRUE(log->append({kNoon, 1, &a, "v", "h", std::nullopt}).ok());
+    ASSERT_TRUE(log->append({kNoon, 2, &b, "v", "h", std::nullopt}).ok());
+    EXPECT_EQ(log->last_csv().filename().string(), results::local_date(kNoon) + ".hub-b.csv");
+    EXPECT_EQ(lines(log->last_csv()).size(), 2u);
+    EXPECT_EQ(lines(log->last_jsonl()).size(), 2u);  // one JSON file for the day
+}
+
+TEST(ResultsLog, AnUnwritableFolderIsNamed) {
+    auto log = results::ResultsLog::open({"/proc/hotgauge-results", true});
+    ASSERT_FALSE(log.ok());
+    EXPECT_NE(log.error().message.find("/proc/hotgauge-results"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace hotgauge
