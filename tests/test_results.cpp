@@ -9,6 +9,8 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "hotgauge/io/recording_io.hpp"
+#include "hotgauge/results/archive.hpp"
 #include "hotgauge/results/results_log.hpp"
 #include "temp_dir.hpp"
 
@@ -148,6 +150,69 @@ TEST(ResultsLog, ARecipeWithOtherFeaturesGetsItsOwnCsv) {
     EXPECT_EQ(log->last_csv().filename().string(), results::local_date(kNoon) + ".hub-b.csv");
     EXPECT_EQ(lines(log->last_csv()).size(), 2u);
     EXPECT_EQ(lines(log->last_jsonl()).size(), 2u);  // one JSON file for the day
+}
+
+core::Recording small_recording(const std::string& id) {
+    core::Recording rec;
+    rec.part_id = id;
+    rec.recipe = "hub-a";
+    rec.captured_at = "2026-11-18T12:00:00Z";
+    rec.temperature_c = 1000.0;
+    core::FaceScan f;
+    f.name = "top";
+    f.width = 64;
+    for (int k = 0; k < 50; ++k) {
+        f.profile_times_ns.push_back(1'000'000'000LL + k * 1'000'000LL);
+        f.profile_positions_mm.push_back(0.2 * k);
+        for (int i = 0; i < 64; ++i) {
+            f.profiles_mm.push_back(static_cast<float>(i));
+            f.profiles_mm.push_back(900.0f);
+        }
+    }
+    rec.faces.push_back(std::move(f));
+    return rec;
+}
+
+TEST(RawArchive, KeepsBadPartsAndEveryNthOkWithinItsQuotaOldestFirst) {
+    test::TempDir tmp;
+    const auto one = [&] {  // the size of one archived recording
+        test::TempDir probe;
+        EXPECT_TRUE(io::write_recording(small_recording("X"), probe.path / "r").ok());
+        std::uint64_t n = 0;
+        for (const auto& e : std::filesystem::recursive_directory_iterator(probe.path))
+            if (e.is_regular_file()) n += e.file_size();
+        return n;
+    }();
+    auto archive = results::RawArchive::open({tmp.path / "archive", one * 5 / 2, 10});
+    ASSERT_TRUE(archive.ok()) << archive.error().message;
+
+    auto ok = part("A", 3, 60.0);
+    EXPECT_FALSE(archive->wants(ok, 7));
+    EXPECT_TRUE(archive->wants(ok, 20));  // every 10th OK part
+    auto nok = ok;
+    nok.measurement.verdict = measure::Verdict::kNok;
+    EXPECT_TRUE(archive->wants(nok, 7));
+    auto degraded = ok;
+    degraded.degraded = true;
+    EXPECT_TRUE(archive->wants(degraded, 7));
+
+    std::vector<std::filesystem::path> stored;
+    for (int seq = 1; seq <= 5; ++seq) {
+        auto where = archive->store(small_recording("P/" + std::to_string(seq)), seq,
+                                    kNoon + seq * 1'000'000'000LL);
+        ASSERT_TRUE(where.ok()) << where.error().message;
+        stored.push_back(*where);
+    }
+    EXPECT_LE(archive->used_bytes(), one * 5 / 2);
+    // The two newest remain, whole and readable again; the oldest went first.
+    for (int i = 0; i < 3; ++i) EXPECT_FALSE(std::filesystem::exists(stored[i])) << stored[i];
+    for (int i = 3; i < 5; ++i) {
+        auto back = io::read_recording(stored[i]);
+        ASSERT_TRUE(back.ok()) << back.error().message;
+        EXPECT_EQ(back->part_id, "P/" + std::to_string(i + 1));
+        EXPECT_EQ(back->faces.at(0).n_profiles(), 50);
+    }
+    EXPECT_EQ(stored[4].filename().string(), "000000000005_P_5");  // a safe folder name
 }
 
 TEST(ResultsLog, AnUnwritableFolderIsNamed) {

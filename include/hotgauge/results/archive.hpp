@@ -1,0 +1,42 @@
+#pragma once
+// The raw archive (docs/results.md "Raw archive"): the recording of every NOK, degraded or
+// unmeasured part and of every Nth OK part, kept under a disk quota, oldest deleted first, so
+// that any archived part can be measured again (`hotgauge measure DIR`).
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+#include "hotgauge/core/recording.hpp"
+#include "hotgauge/core/result.hpp"
+#include "hotgauge/pipeline/pipeline.hpp"
+
+namespace hotgauge::results {
+
+struct ArchiveConfig {
+    std::filesystem::path dir = "archive";
+    std::uint64_t quota_bytes = 20ull << 30;  // all archived recordings together
+    int every_nth_ok = 50;                    // 0: no OK part is kept
+};
+
+// Thread safety: one thread stores.
+class RawArchive {
+  public:
+    static core::Result<RawArchive> open(const ArchiveConfig& config);
+
+    // Whether this part's recording is kept: not OK (NOK, not measured), degraded, or the Nth OK.
+    bool wants(const pipeline::PartResult& result, std::uint64_t sequence) const;
+    // Writes the recording to DIR/YYYY-MM-DD/<sequence>_<part id>/ (local date of time_ns), then
+    // deletes the oldest recordings until the archive is within its quota (never the new one).
+    // Returns the new recording's folder.
+    core::Result<std::filesystem::path> store(const core::Recording& recording,
+                                              std::uint64_t sequence, std::int64_t time_ns);
+    // Bytes the archived recordings take now.
+    std::uint64_t used_bytes() const;
+    const ArchiveConfig& config() const { return config_; }
+
+  private:
+    explicit RawArchive(ArchiveConfig config) : config_(std::move(config)) {}
+    ArchiveConfig config_;
+};
+
+}  // namespace hotgauge::results

@@ -1,0 +1,100 @@
+#include "hotgauge/results/archive.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <vector>
+
+#include "hotgauge/core/log.hpp"
+#include "hotgauge/io/recording_io.hpp"
+#include "hotgauge/results/results_log.hpp"
+
+namespace hotgauge::results {
+namespace {
+
+namespace fs = std::filesystem;
+
+spdlog::logger& log() {
+    static const auto logger = core::module_logger("results");
+    return *logger;
+}
+
+std::uint64_t tree_bytes(const fs::path& dir) {
+    std::uint64_t total = 0;
+    std::error_code ec;
+    for (auto it = fs::recursive_directory_iterator(dir, ec);
+         !ec && it != fs::recursive_directory_iterator(); it.increment(ec))
+        if (it->is_regular_file(ec)) total += it->file_size(ec);
+    return total;
+}
+
+// A part id as a folder name: letters, digits, '-', '_' and '.' kept, anything else '_'.
+std::string safe_name(const std::string& s) {
+    std::string out;
+    for (char c : s)
+        out += (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.')
+                   ? c
+                   : '_';
+    return out.empty() ? "part" : out;
+}
+
+// Every archived recording: DIR/<date>/<sequence>_<id>; names sort oldest first (the date, then
+// the zero-padded sequence).
+std::vector<fs::path> recordings(const fs::path& dir) {
+    std::vector<fs::path> out;
+    std::error_code ec;
+    for (const auto& day : fs::directory_iterator(dir, ec)) {
+        if (!day.is_directory()) continue;
+        for (const auto& rec : fs::directory_iterator(day.path(), ec))
+            if (rec.is_directory()) out.push_back(rec.path());
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+}
+
+}  // namespace
+
+core::Result<RawArchive> RawArchive::open(const ArchiveConfig& config) {
+    std::error_code ec;
+    fs::create_directories(config.dir, ec);
+    if (ec)
+        return core::make_error(config.dir.string() +
+                                ": cannot create the archive folder: " + ec.message());
+    if (config.every_nth_ok < 0) return core::make_error("archive.every_nth_ok: must be >= 0");
+    return RawArchive(config);
+}
+
+bool RawArchive::wants(const pipeline::PartResult& r, std::uint64_t sequence) const {
+    if (r.measurement.verdict != measure::Verdict::kOk || r.degraded) return true;
+    return config_.every_nth_ok > 0 &&
+           sequence % static_cast<std::uint64_t>(config_.every_nth_ok) == 0;
+}
+
+std::uint64_t RawArchive::used_bytes() const { return tree_bytes(config_.dir); }
+
+core::Result<fs::path> RawArchive::store(const core::Recording& rec, std::uint64_t sequence,
+                                         std::int64_t time_ns) {
+    char seq[32];
+    std::snprintf(seq, sizeof seq, "%012llu", static_cast<unsigned long long>(sequence));
+    const fs::path where =
+        config_.dir / local_date(time_ns) / (std::string(seq) + "_" + safe_name(rec.part_id));
+    if (auto ok = io::write_recording(rec, where); !ok) return ok.error();
+    // Within the quota again: oldest first, never the one just written.
+    std::uint64_t used = used_bytes();
+    for (const auto& old : recordings(config_.dir)) {
+        if (used <= config_.quota_bytes) break;
+        if (old == where) continue;
+        const std::uint64_t size = tree_bytes(old);
+        std::error_code ec;
+        fs::remove_all(old, ec);
+        if (ec) {
+            log().error("{}: cannot delete for the archive quota: {}", old.string(), ec.message());
+            break;
+        }
+        used -= std::min(used, size);
+        log().info("archive quota: deleted {} ({} bytes)", old.string(), size);
+        fs::remove(old.parent_path(), ec);  // the day folder, once empty (fails otherwise)
+    }
+    return where;
+}
+
+}  // namespace hotgauge::results
