@@ -1,7 +1,7 @@
-// Laser-line extraction (docs/acquisition.md). The image is read once, row by row, into
-// per-column running maxima: contiguous loads the compiler vectorises, where walking down a
-// column would touch a new cache line for every pixel. Only the few rows around each column's
-// peaks are then read column-wise.
+// Laser-line extraction (docs/acquisition.md). The image is read once, row by row, into the
+// per-column maxima of groups of rows: contiguous loads the compiler vectorises, where walking
+// down a column would touch a new cache line for every pixel. Only the few rows around each
+// column's peak (and those of a second peak that may matter) are then read column-wise.
 #include "hotgauge/acquire/stripe.hpp"
 
 #include <algorithm>
@@ -55,37 +55,50 @@ Background local_background(const Pixel* column, std::ptrdiff_t stride, int heig
     return {};
 }
 
-// One image row into the per-column running maxima (value, first row reaching it) and the
-// current row group's maxima. Fixed-size blocks with unaliased pointers: the form GCC vectorises at
-// -O2 (8 Mono16 columns per 16-byte instruction).
-template <class Pixel, std::size_t kBlock>
-void running_max_block(const Pixel* __restrict row, Pixel* __restrict best,
-                       std::uint16_t* __restrict best_row, Pixel* __restrict group_best,
-                       std::uint16_t r, std::size_t count) {
+// Rows a, b, c, d (repeats allowed: max is idempotent) into their row group's per-column maxima,
+// `init`: the group's first rows (group_best is not read). Fixed-size blocks with unaliased
+// pointers and no data-dependent select: the form GCC vectorises at -O2 in the pixels' own lane
+// width (16 Mono8 or 8 Mono16 columns per 16-byte instruction), four rows per load and store of
+// the maxima.
+template <class Pixel, std::size_t kBlock, bool kInit>
+void group_max_block(const Pixel* __restrict a, const Pixel* __restrict b,
+                     const Pixel* __restrict c, const Pixel* __restrict d,
+                     Pixel* __restrict group_best, std::size_t count) {
     const std::size_t n = kBlock > 0 ? kBlock : count;
-    for (std::size_t c = 0; c < n; ++c) {
-        const bool up = row[c] > best[c];
-        best[c] = up ? row[c] : best[c];
-        best_row[c] = up ? r : best_row[c];
-        group_best[c] = std::max(group_best[c], row[c]);
+    for (std::size_t i = 0; i < n; ++i) {
+        const Pixel m = std::max(std::max(a[i], b[i]), std::max(c[i], d[i]));
+        group_best[i] = kInit ? m : std::max(group_best[i], m);
     }
 }
 
-template <class Pixel>
-void running_max(const Pixel* row, Pixel* best, std::uint16_t* best_row, Pixel* group_best,
-                 std::uint16_t r, std::size_t n) {
+template <class Pixel, bool kInit>
+void rows_into_group(const Pixel* a, const Pixel* b, const Pixel* c, const Pixel* d,
+                     Pixel* group_best, std::size_t n) {
     constexpr std::size_t kBlock = 64;
-    std::size_t c = 0;
-    for (; c + kBlock <= n; c += kBlock)
-        running_max_block<Pixel, kBlock>(row + c, best + c, best_row + c, group_best + c, r, 0);
-    running_max_block<Pixel, 0>(row + c, best + c, best_row + c, group_best + c, r, n - c);
+    std::size_t i = 0;
+    for (; i + kBlock <= n; i += kBlock)
+        group_max_block<Pixel, kBlock, kInit>(a + i, b + i, c + i, d + i, group_best + i, 0);
+    group_max_block<Pixel, 0, kInit>(a + i, b + i, c + i, d + i, group_best + i, n - i);
+}
+
+// One row group's maxima into the per-column maxima (value, first group reaching it).
+template <class Pixel, std::size_t kBlock>
+void peak_group_block(const Pixel* __restrict group_best, Pixel* __restrict best,
+                      std::uint16_t* __restrict best_group, std::uint16_t g, std::size_t count) {
+    const std::size_t n = kBlock > 0 ? kBlock : count;
+    for (std::size_t c = 0; c < n; ++c) {
+        const bool up = group_best[c] > best[c];
+        best[c] = up ? group_best[c] : best[c];
+        best_group[c] = up ? g : best_group[c];
+    }
 }
 
 // Per column, the highest pixel farther than `separation` rows from the column's peak (the first
 // row reaching it): the candidate reflection. Equal to a row-by-row scan of every column, at a
 // fraction of the cost: row groups wholly outside a column's excluded rows contribute their
-// maxima (a vectorised loop over columns per group), the at most two groups the excluded rows cut
-// are read pixel by pixel, and only the winning group is searched for its row.
+// maxima (a vectorised loop over columns per group, for all columns), the at most two groups the
+// excluded rows cut are read pixel by pixel, and the winning group is searched for its row only
+// if the candidate may be a double peak (second_peak, per column when the test is reached).
 template <class Pixel, std::size_t kBlock>
 void group_candidates_block(const Pixel* __restrict group_best, const std::uint16_t* __restrict lo,
                             const std::uint16_t* __restrict hi, Pixel* __restrict best,
@@ -99,21 +112,33 @@ void group_candidates_block(const Pixel* __restrict group_best, const std::uint1
     }
 }
 
-struct SecondPeaks {
-    std::vector<int> value, row;  // value 0: no candidate
-};
+// The first row of row group g of a column holding `value` (the group's maximum: the loop ends
+// in the group).
 template <class Pixel>
-SecondPeaks second_peaks(const Pixel* pixels, std::ptrdiff_t stride, int height,
-                         const std::vector<Pixel>& group_max,
-                         const std::vector<std::uint16_t>& peak_row, int separation) {
+int first_row_at(const Pixel* column, std::ptrdiff_t stride, int g, int value) {
+    int row = g * kGroupRows;
+    while (column[row * stride] != value) ++row;
+    return row;
+}
+
+template <class Pixel>
+struct GroupCandidates {
+    std::vector<std::uint16_t> lo, hi;  // excluded rows [lo, hi]
+    std::vector<Pixel> best;            // the highest maximum of the groups outside them
+    std::vector<std::uint16_t> best_group;
+};
+
+template <class Pixel>
+GroupCandidates<Pixel> group_candidates(int height, const std::vector<Pixel>& group_max,
+                                        const std::vector<std::uint16_t>& peak_row,
+                                        int separation) {
     const std::size_t n = peak_row.size();
-    std::vector<std::uint16_t> lo(n), hi(n);  // excluded rows [lo, hi]
+    GroupCandidates<Pixel> out{std::vector<std::uint16_t>(n), std::vector<std::uint16_t>(n),
+                               std::vector<Pixel>(n, Pixel{0}), std::vector<std::uint16_t>(n, 0)};
     for (std::size_t c = 0; c < n; ++c) {
-        lo[c] = static_cast<std::uint16_t>(std::max(peak_row[c] - separation, 0));
-        hi[c] = static_cast<std::uint16_t>(std::min(peak_row[c] + separation, height - 1));
+        out.lo[c] = static_cast<std::uint16_t>(std::max(peak_row[c] - separation, 0));
+        out.hi[c] = static_cast<std::uint16_t>(std::min(peak_row[c] + separation, height - 1));
     }
-    std::vector<Pixel> best(n, Pixel{0});
-    std::vector<std::uint16_t> best_group(n, 0);
     constexpr std::size_t kBlock = 64;
     for (int g = 0; g * kGroupRows < height; ++g) {
         const auto first = static_cast<std::uint16_t>(g * kGroupRows);
@@ -122,35 +147,43 @@ SecondPeaks second_peaks(const Pixel* pixels, std::ptrdiff_t stride, int height,
         const auto gg = static_cast<std::uint16_t>(g);
         std::size_t c = 0;
         for (; c + kBlock <= n; c += kBlock)
-            group_candidates_block<Pixel, kBlock>(gm + c, lo.data() + c, hi.data() + c,
-                                                  best.data() + c, best_group.data() + c, gg, first,
-                                                  last, 0);
-        group_candidates_block<Pixel, 0>(gm + c, lo.data() + c, hi.data() + c, best.data() + c,
-                                         best_group.data() + c, gg, first, last, n - c);
+            group_candidates_block<Pixel, kBlock>(gm + c, out.lo.data() + c, out.hi.data() + c,
+                                                  out.best.data() + c, out.best_group.data() + c,
+                                                  gg, first, last, 0);
+        group_candidates_block<Pixel, 0>(gm + c, out.lo.data() + c, out.hi.data() + c,
+                                         out.best.data() + c, out.best_group.data() + c, gg, first,
+                                         last, n - c);
     }
+    return out;
+}
 
-    SecondPeaks out{std::vector<int>(n, 0), std::vector<int>(n, -1)};
-    for (std::size_t c = 0; c < n; ++c) {
-        const Pixel* column = pixels + c;
-        int value = best[c], row = -1;
-        if (value > 0)  // the first row of the winning group reaching its maximum
-            for (row = best_group[c] * kGroupRows; column[row * stride] != value; ++row) {
-            }
-        // The rows outside [lo, hi] of the groups the excluded rows cut; ties: the lower row.
-        const auto consider = [&](int r0, int r1) {
-            for (int r = r0; r <= r1; ++r) {
-                const int v = column[r * stride];
-                if (v > value || (v == value && v > 0 && r < row)) {
-                    value = v;
-                    row = r;
-                }
-            }
-        };
-        consider(lo[c] / kGroupRows * kGroupRows, lo[c] - 1);
-        consider(hi[c] + 1, std::min((hi[c] / kGroupRows + 1) * kGroupRows, height) - 1);
-        out.value[c] = value;
-        out.row[c] = row;
-    }
+struct SecondPeak {
+    int value = 0;  // 0: no candidate
+    int row = -1;   // −1 with value > 0: the first row of `group` holding value, not searched yet
+    int group = 0;
+};
+
+// Column c's candidate: the winning group's, unless a row of the groups the excluded rows cut
+// beats it. Those rows are never in the winning group (it lies wholly outside [lo, hi]), so
+// "lower row" on a tie needs only the group's first row, not the searched row.
+template <class Pixel>
+SecondPeak second_peak(const Pixel* column, std::ptrdiff_t stride, int height,
+                       const GroupCandidates<Pixel>& candidates, std::size_t c) {
+    SecondPeak out{candidates.best[c], -1, candidates.best_group[c]};
+    int key = out.value > 0 ? out.group * kGroupRows : -1;  // orders rows as the candidate's row
+    // Ties: the lower row. Selects, not branches: which pixel wins is noise.
+    const auto consider = [&](int r0, int r1) {
+        for (int r = r0; r <= r1; ++r) {
+            const int v = column[r * stride];
+            const bool take = (v > out.value) | ((v == out.value) & (v > 0) & (r < key));
+            out.value = take ? v : out.value;
+            out.row = take ? r : out.row;
+            key = take ? r : key;
+        }
+    };
+    const int lo = candidates.lo[c], hi = candidates.hi[c];
+    consider(lo / kGroupRows * kGroupRows, lo - 1);
+    consider(hi + 1, std::min((hi / kGroupRows + 1) * kGroupRows, height) - 1);
     return out;
 }
 
@@ -162,6 +195,27 @@ double peak_contrast(const Pixel* column, std::ptrdiff_t stride, int height, int
     double sum = 0.0;
     for (int r = r0; r <= r1; ++r) sum += column[r * stride] - background(r);
     return sum / (r1 - r0 + 1);
+}
+
+// An upper bound of the candidate's peak_contrast from the group maxima alone (one value per
+// group, written by the first pass, still in cache), without reading the column's pixels at
+// rows far from the peak. The contrast is the mean of (value − background) over rows m2 − 1 …
+// m2 + 1; the background there is ≥ 0 (a band mean, or the line through two band means
+// evaluated strictly between the bands' centres), and rounding is monotone, so the contrast
+// never exceeds the highest of those pixels, nor the maxima of their groups (m2 not searched
+// yet: anywhere in its group). A bound below the threshold decides the test exactly as the
+// contrast would.
+template <class Pixel>
+int contrast_bound(const SecondPeak& second, const Pixel* group_max_column, std::size_t n,
+                   int height) {
+    const int first = second.row >= 0 ? second.row : second.group * kGroupRows;
+    const int last = second.row >= 0 ? second.row : std::min(first + kGroupRows, height) - 1;
+    const int g0 = std::max(first - 1, 0) / kGroupRows;
+    const int g1 = std::min(last + 1, height - 1) / kGroupRows;
+    int bound = 0;
+    for (int g = g0; g <= g1; ++g)
+        bound = std::max<int>(bound, group_max_column[static_cast<std::size_t>(g) * n]);
+    return bound;
 }
 
 template <class Pixel>
@@ -176,21 +230,45 @@ std::vector<StripePoint> extract(const Pixel* pixels, int width, int height, std
     if (width == 0 || height == 0) return out;
     const auto n = static_cast<std::size_t>(width);
 
-    // One pass over the image: per column the maximum and the first row reaching it, and the
-    // maximum of every group of kGroupRows rows (for the second peak, below).
+    // One pass over the image, row by row: the maximum of every group of kGroupRows rows per
+    // column (also for the second peak, below). Then per column the maximum and the first group
+    // reaching it (a pass over 1/kGroupRows of the image), and in that group the first row
+    // reaching it (at most kGroupRows pixels per column; neighbouring columns' peaks share
+    // cache lines).
     const int n_groups = (height + kGroupRows - 1) / kGroupRows;
-    std::vector<Pixel> peak(n, Pixel{0}),
-        group_max(static_cast<std::size_t>(n_groups) * n, Pixel{0});
-    std::vector<std::uint16_t> peak_row(n, 0);
-    for (int r = 0; r < height; ++r)
-        running_max(pixels + r * stride, peak.data(), peak_row.data(),
-                    group_max.data() + static_cast<std::size_t>(r / kGroupRows) * n,
-                    static_cast<std::uint16_t>(r), n);
+    std::vector<Pixel> group_max(static_cast<std::size_t>(n_groups) * n);
+    for (int g = 0; g < n_groups; ++g) {
+        const int first = g * kGroupRows, last = std::min(first + kGroupRows, height) - 1;
+        Pixel* gm = group_max.data() + static_cast<std::size_t>(g) * n;
+        const auto row = [&](int r) { return pixels + std::min(r, last) * stride; };
+        rows_into_group<Pixel, true>(row(first), row(first + 1), row(first + 2), row(first + 3), gm,
+                                     n);
+        for (int r = first + 4; r <= last; r += 4)
+            rows_into_group<Pixel, false>(row(r), row(r + 1), row(r + 2), row(r + 3), gm, n);
+    }
+    std::vector<Pixel> peak(n, Pixel{0});
+    std::vector<std::uint16_t> peak_row(n, 0);  // the first group reaching the peak, then its row
+    {
+        constexpr std::size_t kBlock = 64;
+        for (int g = 0; g < n_groups; ++g) {
+            const Pixel* gm = group_max.data() + static_cast<std::size_t>(g) * n;
+            const auto gg = static_cast<std::uint16_t>(g);
+            std::size_t c = 0;
+            for (; c + kBlock <= n; c += kBlock)
+                peak_group_block<Pixel, kBlock>(gm + c, peak.data() + c, peak_row.data() + c, gg,
+                                                0);
+            peak_group_block<Pixel, 0>(gm + c, peak.data() + c, peak_row.data() + c, gg, n - c);
+        }
+    }
+    for (std::size_t c = 0; c < n; ++c)
+        peak_row[c] =
+            static_cast<std::uint16_t>(first_row_at(pixels + c, stride, peak_row[c], peak[c]));
 
-    const SecondPeaks second = config.double_peak_ratio > 0.0
-                                   ? second_peaks(pixels, stride, height, group_max, peak_row,
-                                                  config.double_peak_min_separation_px)
-                                   : SecondPeaks{};
+    const bool double_peaks = config.double_peak_ratio > 0.0;
+    const GroupCandidates<Pixel> candidates =
+        double_peaks
+            ? group_candidates(height, group_max, peak_row, config.double_peak_min_separation_px)
+            : GroupCandidates<Pixel>{};
 
     // Per column: classify, then the centre of gravity of (value − background) in the window.
     const int w = config.window_half_width;
@@ -215,17 +293,27 @@ std::vector<StripePoint> extract(const Pixel* pixels, int width, int height, std
             point.status = StripeStatus::kDark;
             continue;
         }
-        if (config.double_peak_ratio > 0.0 && second.value[c] > 0) {
+        if (double_peaks) {
             // Both peaks' contrast as the mean over their 3 central rows, each against its own
             // flanks: a glow gradient rising along the column is not a peak, a single noisy
             // pixel hardly is, a reflection (a line, several pixels wide) is.
-            const int m2 = second.row[c];
-            const double contrast2 = peak_contrast(
-                column, stride, height, m2, local_background(column, stride, height, m2, config));
-            if (contrast2 >=
-                config.double_peak_ratio * peak_contrast(column, stride, height, m, background)) {
-                point.status = StripeStatus::kDoublePeak;
-                continue;
+            SecondPeak second = second_peak(column, stride, height, candidates, c);
+            if (second.value > 0) {
+                const double threshold =
+                    config.double_peak_ratio * peak_contrast(column, stride, height, m, background);
+                // The candidate's rows are read only if its bound can reach the threshold.
+                if (contrast_bound(second, group_max.data() + c, n, height) >= threshold) {
+                    if (second.row < 0)
+                        second.row = first_row_at(column, stride, second.group, second.value);
+                    const int m2 = second.row;
+                    const double contrast2 =
+                        peak_contrast(column, stride, height, m2,
+                                      local_background(column, stride, height, m2, config));
+                    if (contrast2 >= threshold) {
+                        point.status = StripeStatus::kDoublePeak;
+                        continue;
+                    }
+                }
             }
         }
 
