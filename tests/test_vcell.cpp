@@ -2,6 +2,7 @@
 // with known centres, peak rows against their decoder, and the GigE Vision device against
 // Aravis (through acquire::Camera and acquire::CameraSession) on 127.0.0.4, in this process.
 #include <gtest/gtest.h>
+#include <modbus.h>
 
 #include <atomic>
 #include <chrono>
@@ -366,6 +367,76 @@ TEST(VirtualCell, AccelerometerStreamIsContinuousAndFeelsGravity) {
     for (const auto& s : w.samples)
         gz += std::sqrt(s.x_mps2 * s.x_mps2 + s.y_mps2 * s.y_mps2 + s.z_mps2 * s.z_mps2);
     EXPECT_NEAR(gz / static_cast<double>(w.samples.size()), 9.81, 0.5);
+    receiver.stop();
+}
+
+TEST(VirtualCell, TheAxisMovesTheHeadToAnotherFaceOverModbus) {
+    auto recipe = io::read_recipe(HOTGAUGE_SOURCE_DIR "/config/parts/hub-a.yaml");
+    ASSERT_TRUE(recipe.ok());
+    auto cell = sim::read_cell_config(HOTGAUGE_SOURCE_DIR "/config/cell.yaml");
+    ASSERT_TRUE(cell.ok());
+    ASSERT_GE(cell->faces.size(), 2u);
+    accel::AccelRing ring({.capacity_s = 30, .sample_rate_hz = 2000, .gap_periods = 3});
+    accel::UdpReceiverConfig rc;
+    rc.bind = "127.0.0.1:0";
+    accel::UdpAccelReceiver receiver(rc, ring);
+    ASSERT_TRUE(receiver.start().ok());
+    vcell::VirtualCellConfig vc;
+    vc.recipe = *recipe;
+    vc.cell = *cell;
+    vc.device.address = kAddress;
+    vc.accel_to = "127.0.0.1:" + std::to_string(receiver.port());
+    vc.axis_port = 0;
+    vc.axis_move_s = 0.1;
+    auto vcell = vcell::VirtualCell::start(vc);
+    ASSERT_TRUE(vcell.ok()) << vcell.error().message;
+    ASSERT_GT((*vcell)->axis_port(), 0);
+
+    // Gravity as the head's accelerometer should read it at face f (1-based).
+    auto gravity = [&](int f) {
+        const auto& face = cell->faces[static_cast<std::size_t>(f - 1)];
+        const Eigen::Matrix3d R = face.T_world_camera.linear() * face.R_camera_accel;
+        return Eigen::Vector3d(R.transpose() * Eigen::Vector3d(0, 0, 9.81));
+    };
+    auto mean_reading = [&] {
+        const auto now = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                             std::chrono::system_clock::now().time_since_epoch())
+                             .count();
+        EXPECT_TRUE(ring.wait_for(now + 300'000'000, std::chrono::milliseconds(3000)));
+        const auto w = ring.copy_range(now + 50'000'000, now + 300'000'000);
+        Eigen::Vector3d m = Eigen::Vector3d::Zero();
+        for (const auto& smp : w.samples) m += Eigen::Vector3d(smp.x_mps2, smp.y_mps2, smp.z_mps2);
+        return Eigen::Vector3d(m / std::max<double>(1.0, static_cast<double>(w.samples.size())));
+    };
+    EXPECT_LT((mean_reading() - gravity(1)).norm(), 0.5);  // at the first face (top)
+
+    // A PLC or the daemon moves the axis: target face 2, command 1, wait until in position.
+    modbus_t* mb = modbus_new_tcp("127.0.0.1", (*vcell)->axis_port());
+    ASSERT_NE(mb, nullptr);
+    ASSERT_EQ(modbus_connect(mb), 0);
+    const std::uint16_t move[2] = {2, 1};
+    ASSERT_EQ(modbus_write_registers(mb, 0, 2, move), 2);
+    std::uint16_t regs[6] = {};
+    bool arrived = false;
+    for (int i = 0; i < 100 && !arrived; ++i) {
+        ASSERT_EQ(modbus_read_registers(mb, 0, 6, regs), 6);
+        arrived = regs[3] == 0 && regs[2] == 2;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    EXPECT_TRUE(arrived) << "state " << regs[3] << " face " << regs[2];
+    EXPECT_EQ(regs[4], cell->faces.size());
+    EXPECT_EQ(regs[5], 1);                                 // one move completed
+    EXPECT_LT((mean_reading() - gravity(2)).norm(), 0.5);  // the head now reads face 2's gravity
+    EXPECT_GT((gravity(1) - gravity(2)).norm(), 1.0);      // ...which differs from face 1's
+
+    const std::uint16_t bad[2] = {99, 1};  // no such face: fault, the head stays
+    ASSERT_EQ(modbus_write_registers(mb, 0, 2, bad), 2);
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    ASSERT_EQ(modbus_read_registers(mb, 0, 6, regs), 6);
+    EXPECT_EQ(regs[3], 2);
+    EXPECT_EQ(regs[2], 2);
+    modbus_close(mb);
+    modbus_free(mb);
     receiver.stop();
 }
 

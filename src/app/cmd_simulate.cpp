@@ -63,9 +63,12 @@ int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cel
             return 1;
         }
     }
-    std::printf("serving virtual camera %s at %s (%s mode, face %s), accelerometer %s\n",
+    std::printf("serving virtual camera %s at %s (%s mode, face %s), accelerometer %s, axis %s\n",
                 a.vc.device.serial.c_str(), a.vc.device.address.c_str(), a.vc.mode.c_str(),
-                a.vc.face.c_str(), a.vc.accel_to.empty() ? "off" : a.vc.accel_to.c_str());
+                a.vc.face.c_str(), a.vc.accel_to.empty() ? "off" : a.vc.accel_to.c_str(),
+                vcell.axis_port() < 0
+                    ? "off"
+                    : (a.vc.axis_bind + ":" + std::to_string(vcell.axis_port())).c_str());
     std::fflush(stdout);
     const auto t_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(a.seconds);
     while (a.seconds <= 0 || std::chrono::steady_clock::now() < t_end) {
@@ -207,6 +210,9 @@ Command add_simulate(CLI::App& app) {
         ->capture_default_str();
     s->add_option("--packet-loss", a->vc.device.packet_loss,
                   "serve: fraction of GVSP packets the link drops (resend recovers them)")
+        ->capture_default_str();
+    s->add_option("--axis-port", a->vc.axis_port,
+                  "serve: the robot/axis controller's Modbus TCP port (0: any, -1: none)")
         ->capture_default_str();
     s->add_flag("--intensity", a->vc.peaks.intensity, "serve: peaks mode sends an intensity row");
     s->add_flag("--multipart", a->multipart,

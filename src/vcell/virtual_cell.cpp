@@ -27,7 +27,9 @@ constexpr double kServeHorizonS = 7 * 24 * 3600.0;  // press blows are drawn for
 
 struct VirtualCell::Impl {
     VirtualCellConfig config;
-    const sim::FaceConfig* face = nullptr;
+    // The face the sensor is at: set at start, then by the axis (another thread).
+    std::atomic<const sim::FaceConfig*> face{nullptr};
+    std::unique_ptr<AxisServer> axis;
     std::optional<sim::Scene> scene;
     std::optional<sim::Vibration> vibration;
     std::optional<acquire::Triangulation> triangulation;
@@ -52,6 +54,7 @@ struct VirtualCell::Impl {
 
     ~Impl() {
         stop = true;
+        axis.reset();
         if (accel_thread.joinable()) accel_thread.join();
         device.reset();  // stops the renderer's thread before the scene goes
     }
@@ -61,8 +64,8 @@ struct VirtualCell::Impl {
             config.speed_mm_s * static_cast<double>(t_ns - t_scan_start_ns) * 1e-9;
         const Eigen::Vector3d u =
             vibration->displacement_mm(static_cast<double>(t_ns - t0_ns) * 1e-9);
-        return face->T_world_camera.translation() + travel_mm * face->scan_direction.normalized() +
-               u;
+        const sim::FaceConfig* f = face.load();
+        return f->T_world_camera.translation() + travel_mm * f->scan_direction.normalized() + u;
     }
 
     void render(const FrameRequest& req, std::span<std::uint8_t> data);
@@ -80,7 +83,8 @@ void VirtualCell::Impl::render(const FrameRequest& req, std::span<std::uint8_t> 
         sim::ProfileEffects effects;  // the image's own noise replaces the range noise;
         effects.range_noise = false;  // reflections are drawn as second stripes
         effects.spikes = false;
-        scene->cast_profile(*face, sensor_origin(req.timestamp_ns), render_rng, returns, effects);
+        scene->cast_profile(*face.load(), sensor_origin(req.timestamp_ns), render_rng, returns,
+                            effects);
         StripeLook look = config.look;
         look.full_scale = req.bytes_per_pixel == 1 ? 255 : config.look.full_scale;
         render_stripe(returns, *triangulation, look, req.exposure_us,
@@ -106,7 +110,7 @@ void VirtualCell::Impl::render(const FrameRequest& req, std::span<std::uint8_t> 
     profile_rows.resize(w * static_cast<std::size_t>(rpp));
     for (int k = 0; k < profiles; ++k) {
         const std::int64_t t = req.timestamp_ns + k * period_ns;
-        scene->cast_profile(*face, sensor_origin(t), render_rng, returns);
+        scene->cast_profile(*face.load(), sensor_origin(t), render_rng, returns);
         render_peaks(returns, *triangulation, config.peaks, req.width, req.offset_x,
                      config.peak_row_offset, profile_rows.data());
         // One frame: the profile's rows together; multi-part: row kind j of every profile in
@@ -128,12 +132,17 @@ void VirtualCell::Impl::run_accel() {
         static_cast<std::size_t>(std::clamp(std::llround(a.rate_hz * config.accel_datagram_s), 1LL,
                                             static_cast<long long>(accel::kDatagramMaxSamples)));
     sim::RandomStream rng(config.part.seed ^ 0xacce1);
-    const sim::AccelHead head(a, face->T_world_camera.linear() * face->R_camera_accel, rng);
+    const sim::FaceConfig* at = face.load();
+    sim::AccelHead head(a, at->T_world_camera.linear() * at->R_camera_accel, rng);
     std::int64_t next_ns = (now_ns() / period_ns + 1) * period_ns;  // samples on a fixed grid
     std::vector<float> batch;
     while (!stop) {
         std::this_thread::sleep_for(std::chrono::duration<double>(config.accel_datagram_s));
         const std::int64_t now = now_ns();
+        if (const sim::FaceConfig* f = face.load(); f != at) {  // the axis moved the head
+            at = f;
+            head.set_R_world_accel(at->T_world_camera.linear() * at->R_camera_accel);
+        }
         while (next_ns + static_cast<std::int64_t>(per_datagram - 1) * period_ns <= now) {
             batch.clear();
             for (std::size_t q = 0; q < per_datagram; ++q) {
@@ -161,6 +170,8 @@ VirtualCell::~VirtualCell() = default;
 
 const sim::SimTruth& VirtualCell::truth() const { return impl_->scene->truth(); }
 
+int VirtualCell::axis_port() const { return impl_->axis ? impl_->axis->port() : -1; }
+
 VirtualCellStats VirtualCell::stats() const {
     std::lock_guard lock(impl_->stats_mutex);
     VirtualCellStats s = impl_->stats;
@@ -174,9 +185,14 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
     VirtualCellConfig& c = impl->config;
     if (c.mode != "image" && c.mode != "peaks")
         return core::make_error("virtual cell: mode '" + c.mode + "' is not image or peaks");
-    for (const auto& f : c.cell.faces)
-        if (f.name == c.face) impl->face = &f;
-    if (!impl->face) return core::make_error("virtual cell: no face '" + c.face + "' in the cell");
+    int initial = 0;
+    for (std::size_t i = 0; i < c.cell.faces.size(); ++i)
+        if (c.cell.faces[i].name == c.face) {
+            impl->face = &c.cell.faces[i];
+            initial = static_cast<int>(i) + 1;
+        }
+    if (!impl->face.load())
+        return core::make_error("virtual cell: no face '" + c.face + "' in the cell");
     if (c.mode == "peaks")
         if (auto ok = acquire::check_peak_format(c.peaks); !ok) return ok.error();
     if (c.device.multipart_parts >= 2 &&
@@ -211,6 +227,22 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
         [raw](const FrameRequest& req, std::span<std::uint8_t> data) { raw->render(req, data); });
     if (!device) return device.error();
     impl->device = std::move(*device);
+    if (c.axis_port >= 0) {
+        AxisServerConfig ac;
+        ac.bind = c.axis_bind;
+        ac.port = c.axis_port;
+        ac.n_faces = static_cast<int>(c.cell.faces.size());
+        ac.initial_face = initial;
+        ac.move_time_s = c.axis_move_s;
+        auto axis = AxisServer::start(ac, [raw](int f) {
+            const auto& faces = raw->config.cell.faces;
+            raw->face = &faces[static_cast<std::size_t>(f - 1)];
+            detail::log().info("axis: at face {} ({})", f,
+                               faces[static_cast<std::size_t>(f - 1)].name);
+        });
+        if (!axis) return axis.error();
+        impl->axis = std::move(*axis);
+    }
     if (impl->sender) impl->accel_thread = std::thread([raw] { raw->run_accel(); });
     detail::log().info("virtual cell: face {}, {} mode, {} mm/s, accelerometer {}", c.face, c.mode,
                        c.speed_mm_s, c.accel_to.empty() ? "off" : "-> " + c.accel_to);

@@ -77,6 +77,8 @@ class AccelHead {
     AccelHead(const AccelConfig& config, const Eigen::Matrix3d& R_world_accel, RandomStream& rng);
     // One sample at t_s on the vibration's time axis, m/s², accelerometer axes.
     Eigen::Vector3f sample(const Vibration& vibration, double t_s, RandomStream& rng) const;
+    // The head was moved to another face: same sensor, other orientation.
+    void set_R_world_accel(const Eigen::Matrix3d& R) { R_world_accel_ = R; }
 
   private:
     Eigen::Matrix3d R_world_accel_;

@@ -17,6 +17,7 @@
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/result.hpp"
 #include "hotgauge/sim/simulator.hpp"
+#include "hotgauge/vcell/axis_server.hpp"
 #include "hotgauge/vcell/gv_device.hpp"
 #include "hotgauge/vcell/render.hpp"
 
@@ -38,6 +39,11 @@ struct VirtualCellConfig {
     std::string accel_to;  // HOST:PORT of the daemon's accelerometer receiver; "" = none
     std::uint16_t accel_sensor_id = 0;
     double accel_datagram_s = 0.01;  // samples per datagram: rate × this
+    // The robot/axis controller (axis_server.hpp): Modbus TCP; port 0 = ephemeral, −1 = none
+    // (the sensor stays at `face`).
+    int axis_port = -1;
+    std::string axis_bind = "127.0.0.1";
+    double axis_move_s = 0.3;
 };
 
 struct VirtualCellStats {
@@ -55,6 +61,7 @@ class VirtualCell {
     VirtualCell& operator=(const VirtualCell&) = delete;
 
     const sim::SimTruth& truth() const;
+    int axis_port() const;  // −1 without an axis
     VirtualCellStats stats() const;
 
   private:
