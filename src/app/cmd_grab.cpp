@@ -165,6 +165,8 @@ int run(GrabArgs a) {
         spdlog::error("--exposure-table: {}", table.error().message);
         return 2;
     }
+    if (!table->empty() && !a.temperature_c)
+        spdlog::warn("--exposure-table without --temperature: the exposure is left as configured");
     acquire::CameraSession session(a.camera, a.scan, *tri, *table);
     if (auto ok = session.connect(); !ok) {
         spdlog::error("{}", ok.error().message);
