@@ -1,0 +1,62 @@
+#pragma once
+// The daemon's configuration (config/hotgauged.yaml, docs/operations.md "Configuration"): one
+// YAML file for the whole cell, read and validated at start (and again at SIGHUP) with every
+// error naming file:line:key, and `hotgauged --check-config` to check it before a restart.
+// Paths in it are relative to the file's folder.
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "hotgauge/accel/source.hpp"
+#include "hotgauge/acquire/camera.hpp"
+#include "hotgauge/acquire/scan.hpp"
+#include "hotgauge/acquire/session.hpp"
+#include "hotgauge/core/result.hpp"
+#include "hotgauge/plc/pyrometer.hpp"
+#include "hotgauge/plc/server.hpp"
+#include "hotgauge/results/archive.hpp"
+#include "hotgauge/results/results_log.hpp"
+
+namespace hotgauge::cell {
+
+// The robot or axis that takes the sensor from face to face (vcell/axis_server.hpp's map).
+struct AxisConfig {
+    std::string kind = "none";  // none: the sensor does not move (one face, or moved by others)
+    std::string address;        // modbus: HOST:PORT
+    int unit_id = 1;
+    std::map<std::string, int> faces;  // face name -> the controller's position number
+    int timeout_ms = 10'000;           // a move that takes longer is a fault
+};
+
+struct AcquisitionConfig {
+    acquire::CameraConfig camera;
+    acquire::ScanConfig scan;  // frame mode, stripe/peaks settings, speed, line period, offsets
+    std::vector<std::pair<double, double>> exposure_table;  // (°C, µs), increasing °C
+    double scan_s = 2.5;                                    // each face's scan
+};
+
+struct DaemonConfig {
+    std::filesystem::path file;                    // where it was read from
+    std::filesystem::path cell_file;               // face geometry (camera poses): the cell config
+    std::map<int, std::filesystem::path> recipes;  // PLC recipe slot -> recipe file
+    std::map<int, std::filesystem::path> models;   // optional saved .hgm models per slot
+    std::vector<std::string> faces;                // scan order for "all faces"
+    AcquisitionConfig acquisition;
+    std::optional<accel::AccelSourceConfig> accelerometer;  // absent: no compensation
+    double accel_margin_s = 0.75;
+    AxisConfig axis;
+    plc::ServerConfig plc;
+    std::optional<plc::PyrometerConfig> pyrometer;  // absent: the temperature comes from nowhere
+    results::ResultsConfig results;
+    results::ArchiveConfig archive;
+    std::string hash;  // of the file's bytes: goes with every result
+};
+
+// Reads and validates; errors name file:line and the key. Referenced files (recipes, models,
+// the cell config) must exist; their content is checked by their own readers at start.
+core::Result<DaemonConfig> read_daemon_config(const std::filesystem::path& file);
+
+}  // namespace hotgauge::cell

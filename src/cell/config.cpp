@@ -1,0 +1,278 @@
+#include "hotgauge/cell/config.hpp"
+
+#include <fstream>
+#include <iterator>
+#include <set>
+#include <sstream>
+
+#include "hotgauge/accel/udp.hpp"
+#include "hotgauge/cell/plc_sections.hpp"
+#include "hotgauge/io/yaml_reader.hpp"
+
+namespace hotgauge::cell {
+namespace {
+
+namespace fs = std::filesystem;
+using io::YamlReader;
+
+// FNV-1a over the file's bytes, as 16 hex digits: which configuration measured a part.
+std::string file_hash(const fs::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::uint64_t h = 1469598103934665603ull;
+    for (unsigned char c : bytes) {
+        h ^= c;
+        h *= 1099511628211ull;
+    }
+    char out[17];
+    std::snprintf(out, sizeof out, "%016llx", static_cast<unsigned long long>(h));
+    return out;
+}
+
+double positive(const YamlReader& y, const YAML::Node& map, const std::string& what,
+                const char* key, double fallback) {
+    const double v = y.number_or(map, what, key, fallback);
+    if (!(v > 0.0)) y.fail(map[key] ? map[key] : map, what + "." + key + ": must be positive");
+    return v;
+}
+
+// A path relative to the config file's folder; it must exist.
+fs::path existing(const YamlReader& y, const YAML::Node& node, const std::string& what,
+                  const fs::path& base) {
+    const fs::path p = base / y.string(node, what);
+    if (!fs::exists(p)) y.fail(node, what + ": " + p.string() + " does not exist");
+    return p;
+}
+
+void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a) {
+    const std::string w = "camera";
+    y.expect_map(c, w,
+                 {"id",
+                  "mode",
+                  "width",
+                  "height",
+                  "offset_x",
+                  "offset_y",
+                  "pixel_format",
+                  "frame_rate_hz",
+                  "exposure_us",
+                  "trigger",
+                  "trigger_source",
+                  "packet_size",
+                  "packet_resend",
+                  "buffers",
+                  "timeout_ms",
+                  "max_timeouts",
+                  "features",
+                  "scan_s",
+                  "speed_mm_s",
+                  "line_rate_hz",
+                  "clock_offset_ns",
+                  "peaks",
+                  "stripe",
+                  "exposure_table"});
+    auto& cam = a.camera;
+    auto& scan = a.scan;
+    cam.id = y.string(y.require(c, w, "id"), w + ".id");
+    if (c["mode"]) {
+        scan.frame_mode = y.string(c["mode"], w + ".mode");
+        if (scan.frame_mode != "image" && scan.frame_mode != "peaks")
+            y.fail(c["mode"], w + ".mode: must be image or peaks");
+    }
+    cam.width = integer_in(y, c, w, "width", 0, 65535, cam.width);
+    cam.height = integer_in(y, c, w, "height", 0, 65535, cam.height);
+    cam.offset_x = integer_in(y, c, w, "offset_x", 0, 65535, cam.offset_x);
+    cam.offset_y = integer_in(y, c, w, "offset_y", 0, 65535, cam.offset_y);
+    if (c["pixel_format"]) cam.pixel_format = y.string(c["pixel_format"], w + ".pixel_format");
+    cam.frame_rate_hz = y.number_or(c, w, "frame_rate_hz", cam.frame_rate_hz);
+    cam.exposure_us = y.number_or(c, w, "exposure_us", cam.exposure_us);
+    if (c["trigger"]) {
+        cam.trigger = y.string(c["trigger"], w + ".trigger");
+        if (cam.trigger != "free" && cam.trigger != "software" && cam.trigger != "external")
+            y.fail(c["trigger"], w + ".trigger: must be free, software or external");
+    }
+    if (c["trigger_source"])
+        cam.trigger_source = y.string(c["trigger_source"], w + ".trigger_source");
+    cam.packet_size = integer_in(y, c, w, "packet_size", 0, 16000, cam.packet_size);
+    if (c["packet_resend"]) cam.packet_resend = y.boolean(c["packet_resend"], w + ".packet_resend");
+    cam.n_buffers = integer_in(y, c, w, "buffers", 2, 1024, cam.n_buffers);
+    cam.timeout_ms = integer_in(y, c, w, "timeout_ms", 1, 600000, cam.timeout_ms);
+    cam.max_timeouts = integer_in(y, c, w, "max_timeouts", 1, 1000, cam.max_timeouts);
+    if (const YAML::Node f = c["features"]) {  // an ordered list of [NAME, VALUE]
+        if (!f.IsSequence()) y.fail(f, w + ".features: expected a list of [NAME, VALUE]");
+        for (std::size_t i = 0; i < f.size(); ++i) {
+            const auto pair = y.strings(f[i], w + ".features");
+            if (pair.size() != 2) y.fail(f[i], w + ".features: expected [NAME, VALUE]");
+            cam.features.emplace_back(pair[0], pair[1]);
+        }
+    }
+    a.scan_s = positive(y, c, w, "scan_s", a.scan_s);
+    scan.speed_mm_s = positive(y, c, w, "speed_mm_s", scan.speed_mm_s);
+    scan.line_period_s = 1.0 / positive(y, c, w, "line_rate_hz", 1.0 / scan.line_period_s);
+    if (c["clock_offset_ns"])
+        scan.clock_offset_ns = y.integer(c["clock_offset_ns"], w + ".clock_offset_ns");
+    if (const YAML::Node p = c["peaks"]) {
+        const std::string pw = w + ".peaks";
+        y.expect_map(p, pw,
+                     {"profiles_per_frame", "fractional_bits", "row_offset", "second_peak",
+                      "intensity", "width", "intensity_max_value"});
+        auto& f = scan.peaks;
+        f.profiles_per_frame =
+            integer_in(y, p, pw, "profiles_per_frame", 1, 65535, f.profiles_per_frame);
+        f.fractional_bits = integer_in(y, p, pw, "fractional_bits", 0, 15, f.fractional_bits);
+        scan.offset_y_px = integer_in(y, p, pw, "row_offset", 0, 65535, 0);
+        if (p["second_peak"]) f.second_peak = y.boolean(p["second_peak"], pw + ".second_peak");
+        if (p["intensity"]) f.intensity = y.boolean(p["intensity"], pw + ".intensity");
+        if (p["width"]) f.peak_width = y.boolean(p["width"], pw + ".width");
+        f.intensity_max_value =
+            integer_in(y, p, pw, "intensity_max_value", 1, 65535, f.intensity_max_value);
+        if (auto ok = acquire::check_peak_format(f); !ok) y.fail(p, pw + ": " + ok.error().message);
+    }
+    if (const YAML::Node s = c["stripe"]) {
+        const std::string sw = w + ".stripe";
+        y.expect_map(
+            s, sw,
+            {"max_value", "saturation_level", "min_peak", "window_half_width", "background_band",
+             "gaussian_refinement", "double_peak_ratio", "double_peak_min_separation_px"});
+        auto& o = scan.stripe;
+        o.max_value = integer_in(y, s, sw, "max_value", 1, 65535, o.max_value);
+        o.saturation_level = integer_in(y, s, sw, "saturation_level", 0, 65535, o.saturation_level);
+        o.min_peak = y.number_or(s, sw, "min_peak", o.min_peak);
+        o.window_half_width = integer_in(y, s, sw, "window_half_width", 1, 64, o.window_half_width);
+        o.background_band = integer_in(y, s, sw, "background_band", 0, 64, o.background_band);
+        if (s["gaussian_refinement"])
+            o.gaussian_refinement =
+                y.boolean(s["gaussian_refinement"], sw + ".gaussian_refinement");
+        o.double_peak_ratio = y.number_or(s, sw, "double_peak_ratio", o.double_peak_ratio);
+        o.double_peak_min_separation_px = integer_in(y, s, sw, "double_peak_min_separation_px", 1,
+                                                     4096, o.double_peak_min_separation_px);
+        if (auto ok = acquire::check_stripe_config(o); !ok)
+            y.fail(s, sw + ": " + ok.error().message);
+    }
+    if (scan.frame_mode == "image") scan.offset_y_px = cam.offset_y;
+    scan.offset_x_px = cam.offset_x;
+    if (const YAML::Node t = c["exposure_table"]) {
+        if (!t.IsSequence()) y.fail(t, w + ".exposure_table: expected a list of [°C, µs]");
+        for (std::size_t i = 0; i < t.size(); ++i) {
+            const auto v = y.numbers(t[i], w + ".exposure_table", 2);
+            a.exposure_table.emplace_back(v[0], v[1]);
+        }
+        if (auto ok = acquire::ExposureTable::create(a.exposure_table); !ok)
+            y.fail(t, w + ".exposure_table: " + ok.error().message);
+    }
+}
+
+}  // namespace
+
+core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
+    const YamlReader y(file.string());
+    return y.guarded<DaemonConfig>([&] {
+        const YAML::Node root = y.load();
+        y.expect_map(root, "hotgauged",
+                     {"cell", "faces", "recipes", "models", "camera", "accelerometer", "axis",
+                      "plc", "pyrometer", "results"});
+        DaemonConfig c;
+        c.file = file;
+        c.hash = file_hash(file);
+        const fs::path base = file.parent_path();
+        c.cell_file = existing(y, y.require(root, "hotgauged", "cell"), "cell", base);
+
+        const YAML::Node recipes = y.require(root, "hotgauged", "recipes");
+        if (!recipes.IsMap() || recipes.size() == 0)
+            y.fail(recipes, "recipes: expected slot: file pairs (slot 1..65535)");
+        for (const auto& kv : recipes) {
+            const auto slot = y.integer(kv.first, "recipes: slot");
+            if (slot < 1 || slot > 65535) y.fail(kv.first, "recipes: slot must be in 1..65535");
+            c.recipes[static_cast<int>(slot)] = existing(y, kv.second, "recipes", base);
+        }
+        if (const YAML::Node m = root["models"]) {
+            if (!m.IsMap()) y.fail(m, "models: expected slot: file pairs");
+            for (const auto& kv : m) {
+                const auto slot = static_cast<int>(y.integer(kv.first, "models: slot"));
+                if (!c.recipes.count(slot))
+                    y.fail(kv.first, "models: slot " + std::to_string(slot) + " has no recipe");
+                c.models[slot] = existing(y, kv.second, "models", base);
+            }
+        }
+        c.faces = root["faces"] ? y.strings(root["faces"], "faces")
+                                : std::vector<std::string>{"top", "bottom", "side1", "side2"};
+        if (c.faces.empty()) y.fail(root["faces"], "faces: at least one face");
+        if (std::set<std::string>(c.faces.begin(), c.faces.end()).size() != c.faces.size())
+            y.fail(root["faces"], "faces: a face is listed twice");
+
+        read_camera(y, y.require(root, "hotgauged", "camera"), c.acquisition);
+
+        if (const YAML::Node a = root["accelerometer"]) {
+            const std::string w = "accelerometer";
+            y.expect_map(a, w,
+                         {"source", "bind", "sensor_id", "device_dir", "buffer_path", "margin_s"});
+            const std::string source = y.string(y.require(a, w, "source"), w + ".source");
+            c.accel_margin_s = positive(y, a, w, "margin_s", c.accel_margin_s);
+            if (source != "none") {
+                auto kind = accel::parse_accel_source_kind(source);
+                if (!kind || *kind == accel::AccelSourceKind::recording)
+                    y.fail(a["source"], w + ".source: must be udp, iio or none");
+                accel::AccelSourceConfig s;
+                s.kind = *kind;
+                if (a["bind"]) s.udp.bind = y.string(a["bind"], w + ".bind");
+                if (a["sensor_id"])
+                    s.udp.sensor_id =
+                        static_cast<std::uint16_t>(integer_in(y, a, w, "sensor_id", 0, 65535, 0));
+                if (a["device_dir"])
+                    s.iio.device_dir = y.string(a["device_dir"], w + ".device_dir");
+                if (a["buffer_path"])
+                    s.iio.buffer_path = y.string(a["buffer_path"], w + ".buffer_path");
+                if (auto ok = accel::validate(s); !ok) y.fail(a, w + ": " + ok.error().message);
+                c.accelerometer = s;
+            }
+        }
+
+        if (const YAML::Node x = root["axis"]) {
+            const std::string w = "axis";
+            y.expect_map(x, w, {"kind", "address", "unit_id", "faces", "timeout_ms"});
+            auto& o = c.axis;
+            o.kind = y.string(y.require(x, w, "kind"), w + ".kind");
+            if (o.kind != "none" && o.kind != "modbus")
+                y.fail(x["kind"], w + ".kind: must be modbus or none");
+            if (o.kind == "modbus") {
+                o.address = y.string(y.require(x, w, "address"), w + ".address");
+                if (!accel::parse_host_port(o.address, w + ".address"))
+                    y.fail(x["address"], w + ".address: expected HOST:PORT");
+                o.unit_id = integer_in(y, x, w, "unit_id", 0, 255, o.unit_id);
+                o.timeout_ms = integer_in(y, x, w, "timeout_ms", 100, 600000, o.timeout_ms);
+                const YAML::Node f = y.require(x, w, "faces");
+                if (!f.IsMap()) y.fail(f, w + ".faces: expected face: position pairs");
+                for (const auto& kv : f) {
+                    const std::string face = y.string(kv.first, w + ".faces");
+                    o.faces[face] = static_cast<int>(y.integer(kv.second, w + ".faces." + face));
+                }
+                for (const auto& face : c.faces)
+                    if (!o.faces.count(face))
+                        y.fail(f, w + ".faces: no position for face '" + face + "'");
+            }
+        }
+
+        if (const YAML::Node p = root["plc"]) read_plc_server(y, p, "plc", c.plc);
+        if (const YAML::Node p = root["pyrometer"]) {
+            plc::PyrometerConfig py;
+            read_pyrometer(y, p, "pyrometer", py);
+            c.pyrometer = py;
+        }
+        if (const YAML::Node r = root["results"]) {
+            const std::string w = "results";
+            y.expect_map(
+                r, w, {"dir", "archive_dir", "archive_quota_gb", "archive_every_nth_ok", "sync"});
+            if (r["dir"]) c.results.dir = base / y.string(r["dir"], w + ".dir");
+            if (r["archive_dir"])
+                c.archive.dir = base / y.string(r["archive_dir"], w + ".archive_dir");
+            c.archive.quota_bytes = static_cast<std::uint64_t>(
+                positive(y, r, w, "archive_quota_gb", 20.0) * 1024.0 * 1024.0 * 1024.0);
+            c.archive.every_nth_ok =
+                integer_in(y, r, w, "archive_every_nth_ok", 0, 1'000'000, c.archive.every_nth_ok);
+            if (r["sync"]) c.results.sync = y.boolean(r["sync"], w + ".sync");
+        }
+        return c;
+    });
+}
+
+}  // namespace hotgauge::cell

@@ -1,0 +1,100 @@
+// The daemon's configuration (config/hotgauged.yaml): the example reads, and every kind of
+// mistake is an error naming file:line and the key.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <regex>
+
+#include "hotgauge/cell/config.hpp"
+#include "temp_dir.hpp"
+
+namespace hotgauge {
+namespace {
+
+const std::string kConfigDir = HOTGAUGE_SOURCE_DIR "/config";
+
+TEST(DaemonConfig, TheExampleReads) {
+    auto c = cell::read_daemon_config(kConfigDir + "/hotgauged.yaml");
+    ASSERT_TRUE(c.ok()) << c.error().message;
+    EXPECT_EQ(c->acquisition.camera.id, "127.0.0.2");
+    EXPECT_EQ(c->acquisition.scan.frame_mode, "peaks");
+    EXPECT_EQ(c->acquisition.scan.peaks.profiles_per_frame, 10);
+    EXPECT_NEAR(c->acquisition.scan.line_period_s, 1e-3, 1e-12);
+    EXPECT_EQ(c->acquisition.exposure_table.size(), 4u);
+    EXPECT_EQ(c->faces, (std::vector<std::string>{"top", "bottom", "side1", "side2"}));
+    ASSERT_EQ(c->recipes.count(1), 1u);
+    EXPECT_TRUE(std::filesystem::exists(c->recipes.at(1)));
+    ASSERT_TRUE(c->accelerometer);
+    EXPECT_EQ(c->accelerometer->udp.bind, "127.0.0.1:47355");
+    EXPECT_EQ(c->axis.kind, "modbus");
+    EXPECT_EQ(c->axis.faces.at("side2"), 4);
+    EXPECT_EQ(c->plc.port, 502);
+    EXPECT_FALSE(c->pyrometer);
+    EXPECT_EQ(c->archive.every_nth_ok, 50);
+    EXPECT_TRUE(std::regex_match(c->hash, std::regex("[0-9a-f]{16}")));
+}
+
+// The example with one line replaced (or appended); the result's error, or "" when it read.
+std::string error_with(const std::string& from, const std::string& to, int* line = nullptr) {
+    std::ifstream in(kConfigDir + "/hotgauged.yaml");
+    std::stringstream ss;
+    ss << in.rdbuf();
+    std::string text = ss.str();
+    // Paths relative to the example's folder become absolute, as the copy lives elsewhere.
+    text = std::regex_replace(text, std::regex("cell: cell.yaml"),
+                              "cell: " + kConfigDir + "/cell.yaml");
+    text = std::regex_replace(text, std::regex("1: parts/hub-a.yaml"),
+                              "1: " + kConfigDir + "/parts/hub-a.yaml");
+    if (from.empty()) {
+        text += to + "\n";
+    } else {
+        const auto at = text.find(from);
+        EXPECT_NE(at, std::string::npos) << from;
+        if (line) *line = static_cast<int>(std::count(text.begin(), text.begin() + at, '\n')) + 1;
+        text.replace(at, from.size(), to);
+    }
+    test::TempDir tmp;
+    const auto file = tmp.path / "hotgauged.yaml";
+    std::ofstream(file) << text;
+    auto c = cell::read_daemon_config(file);
+    if (c.ok()) return "";
+    // Every message starts with the file and a line number.
+    EXPECT_EQ(c.error().message.rfind(file.string() + ":", 0), 0u) << c.error().message;
+    return c.error().message;
+}
+
+TEST(DaemonConfig, MistakesAreNamedWithFileLineAndKey) {
+    EXPECT_EQ(error_with("", ""), "");  // the copy itself reads
+    int line = 0;
+    auto e = error_with("  mode: peaks", "  mode: laser", &line);
+    EXPECT_NE(e.find(":" + std::to_string(line) + ": camera.mode: must be image or peaks"),
+              std::string::npos)
+        << e;
+    e = error_with("  port: 502", "  port: 70000", &line);
+    EXPECT_NE(e.find(":" + std::to_string(line) + ": plc.port: must be in 0..65535"),
+              std::string::npos)
+        << e;
+    e = error_with("faces: {top: 1, bottom: 2, side1: 3, side2: 4}", "faces: {top: 1, bottom: 2}");
+    EXPECT_NE(e.find("axis.faces: no position for face 'side1'"), std::string::npos) << e;
+    e = error_with("[1000, 100], [1200, 50]", "[1000, 100], [900, 50]");
+    EXPECT_NE(e.find("camera.exposure_table: exposure table point 4: temperatures must increase"),
+              std::string::npos)
+        << e;
+    e = error_with("", "colour: red");  // a typo must not pass silently
+    EXPECT_NE(e.find("colour"), std::string::npos) << e;
+    e = error_with("1: " + kConfigDir + "/parts/hub-a.yaml", "1: /nonexistent/hub-z.yaml");
+    EXPECT_NE(e.find("recipes: /nonexistent/hub-z.yaml does not exist"), std::string::npos) << e;
+    e = error_with("  source: udp", "  source: carrier-pigeon");
+    EXPECT_NE(e.find("accelerometer.source"), std::string::npos) << e;
+    e = error_with("  id: 127.0.0.2", "  name: 127.0.0.2");
+    EXPECT_NE(e.find("camera"), std::string::npos) << e;
+}
+
+TEST(DaemonConfig, AMissingFileIsNamed) {
+    auto c = cell::read_daemon_config("/nonexistent/hotgauged.yaml");
+    ASSERT_FALSE(c.ok());
+    EXPECT_NE(c.error().message.find("/nonexistent/hotgauged.yaml"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace hotgauge
