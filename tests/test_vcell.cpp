@@ -8,7 +8,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <random>
 #include <thread>
@@ -337,23 +339,43 @@ TEST(ExposureTable, InterpolatesClampsAndNamesBadPoints) {
     EXPECT_FALSE(acquire::ExposureTable::create({{700, 0}}).ok());
 }
 
+// The virtual cell on this test's address, its accelerometer stream received into `ring`.
+struct CellWithReceiver {
+    sim::CellConfig cell;
+    accel::AccelRing ring{{.capacity_s = 30, .sample_rate_hz = 2000, .gap_periods = 3}};
+    std::unique_ptr<accel::UdpAccelReceiver> receiver;
+    std::unique_ptr<vcell::VirtualCell> vcell;
+
+    void start(const std::function<void(vcell::VirtualCellConfig&)>& adjust = {}) {
+        auto recipe = io::read_recipe(HOTGAUGE_SOURCE_DIR "/config/parts/hub-a.yaml");
+        ASSERT_TRUE(recipe.ok());
+        auto c = sim::read_cell_config(HOTGAUGE_SOURCE_DIR "/config/cell.yaml");
+        ASSERT_TRUE(c.ok());
+        cell = *c;
+        accel::UdpReceiverConfig rc;
+        rc.bind = "127.0.0.1:0";
+        receiver = std::make_unique<accel::UdpAccelReceiver>(rc, ring);
+        ASSERT_TRUE(receiver->start().ok());
+        vcell::VirtualCellConfig vc;
+        vc.recipe = *recipe;
+        vc.cell = cell;
+        vc.device.address = kAddress;
+        vc.accel_to = "127.0.0.1:" + std::to_string(receiver->port());
+        if (adjust) adjust(vc);
+        auto started = vcell::VirtualCell::start(vc);
+        ASSERT_TRUE(started.ok()) << started.error().message;
+        vcell = std::move(*started);
+    }
+    ~CellWithReceiver() {
+        vcell.reset();
+        if (receiver) receiver->stop();
+    }
+};
+
 TEST(VirtualCell, AccelerometerStreamIsContinuousAndFeelsGravity) {
-    auto recipe = io::read_recipe(HOTGAUGE_SOURCE_DIR "/config/parts/hub-a.yaml");
-    ASSERT_TRUE(recipe.ok());
-    auto cell = sim::read_cell_config(HOTGAUGE_SOURCE_DIR "/config/cell.yaml");
-    ASSERT_TRUE(cell.ok());
-    accel::AccelRing ring({.capacity_s = 30, .sample_rate_hz = 2000, .gap_periods = 3});
-    accel::UdpReceiverConfig rc;
-    rc.bind = "127.0.0.1:0";
-    accel::UdpAccelReceiver receiver(rc, ring);
-    ASSERT_TRUE(receiver.start().ok());
-    vcell::VirtualCellConfig vc;
-    vc.recipe = *recipe;
-    vc.cell = *cell;
-    vc.device.address = kAddress;
-    vc.accel_to = "127.0.0.1:" + std::to_string(receiver.port());
-    auto vcell = vcell::VirtualCell::start(vc);
-    ASSERT_TRUE(vcell.ok()) << vcell.error().message;
+    CellWithReceiver c;
+    ASSERT_NO_FATAL_FAILURE(c.start());
+    auto& ring = c.ring;
     const auto t0 = std::chrono::system_clock::now();
     const auto ns = [](auto tp) {
         return std::chrono::duration_cast<std::chrono::nanoseconds>(tp.time_since_epoch()).count();
@@ -367,34 +389,23 @@ TEST(VirtualCell, AccelerometerStreamIsContinuousAndFeelsGravity) {
     for (const auto& s : w.samples)
         gz += std::sqrt(s.x_mps2 * s.x_mps2 + s.y_mps2 * s.y_mps2 + s.z_mps2 * s.z_mps2);
     EXPECT_NEAR(gz / static_cast<double>(w.samples.size()), 9.81, 0.5);
-    receiver.stop();
 }
 
 TEST(VirtualCell, TheAxisMovesTheHeadToAnotherFaceOverModbus) {
-    auto recipe = io::read_recipe(HOTGAUGE_SOURCE_DIR "/config/parts/hub-a.yaml");
-    ASSERT_TRUE(recipe.ok());
-    auto cell = sim::read_cell_config(HOTGAUGE_SOURCE_DIR "/config/cell.yaml");
-    ASSERT_TRUE(cell.ok());
-    ASSERT_GE(cell->faces.size(), 2u);
-    accel::AccelRing ring({.capacity_s = 30, .sample_rate_hz = 2000, .gap_periods = 3});
-    accel::UdpReceiverConfig rc;
-    rc.bind = "127.0.0.1:0";
-    accel::UdpAccelReceiver receiver(rc, ring);
-    ASSERT_TRUE(receiver.start().ok());
-    vcell::VirtualCellConfig vc;
-    vc.recipe = *recipe;
-    vc.cell = *cell;
-    vc.device.address = kAddress;
-    vc.accel_to = "127.0.0.1:" + std::to_string(receiver.port());
-    vc.axis_port = 0;
-    vc.axis_move_s = 0.1;
-    auto vcell = vcell::VirtualCell::start(vc);
-    ASSERT_TRUE(vcell.ok()) << vcell.error().message;
-    ASSERT_GT((*vcell)->axis_port(), 0);
+    CellWithReceiver c;
+    ASSERT_NO_FATAL_FAILURE(c.start([](vcell::VirtualCellConfig& vc) {
+        vc.axis_port = 0;
+        vc.axis_move_s = 0.1;
+    }));
+    auto& ring = c.ring;
+    const auto& cell = c.cell;
+    ASSERT_GE(cell.faces.size(), 2u);
+    auto& vcell = c.vcell;
+    ASSERT_GT(vcell->axis_port(), 0);
 
     // Gravity as the head's accelerometer should read it at face f (1-based).
     auto gravity = [&](int f) {
-        const auto& face = cell->faces[static_cast<std::size_t>(f - 1)];
+        const auto& face = cell.faces[static_cast<std::size_t>(f - 1)];
         const Eigen::Matrix3d R = face.T_world_camera.linear() * face.R_camera_accel;
         return Eigen::Vector3d(R.transpose() * Eigen::Vector3d(0, 0, 9.81));
     };
@@ -411,7 +422,7 @@ TEST(VirtualCell, TheAxisMovesTheHeadToAnotherFaceOverModbus) {
     EXPECT_LT((mean_reading() - gravity(1)).norm(), 0.5);  // at the first face (top)
 
     // A PLC or the daemon moves the axis: target face 2, command 1, wait until in position.
-    modbus_t* mb = modbus_new_tcp("127.0.0.1", (*vcell)->axis_port());
+    modbus_t* mb = modbus_new_tcp("127.0.0.1", vcell->axis_port());
     ASSERT_NE(mb, nullptr);
     ASSERT_EQ(modbus_connect(mb), 0);
     const std::uint16_t move[2] = {2, 1};
@@ -424,7 +435,7 @@ TEST(VirtualCell, TheAxisMovesTheHeadToAnotherFaceOverModbus) {
         std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
     EXPECT_TRUE(arrived) << "state " << regs[3] << " face " << regs[2];
-    EXPECT_EQ(regs[4], cell->faces.size());
+    EXPECT_EQ(regs[4], cell.faces.size());
     EXPECT_EQ(regs[5], 1);                                 // one move completed
     EXPECT_LT((mean_reading() - gravity(2)).norm(), 0.5);  // the head now reads face 2's gravity
     EXPECT_GT((gravity(1) - gravity(2)).norm(), 1.0);      // ...which differs from face 1's
@@ -437,7 +448,6 @@ TEST(VirtualCell, TheAxisMovesTheHeadToAnotherFaceOverModbus) {
     EXPECT_EQ(regs[2], 2);
     modbus_close(mb);
     modbus_free(mb);
-    receiver.stop();
 }
 
 }  // namespace
