@@ -110,6 +110,30 @@ TEST(ResultsLog, ATornLastLineIsCutWhenTheFileIsOpenedAgain) {
     EXPECT_EQ(lines(jsonl).size(), 2u);
 }
 
+TEST(ResultsLog, ATornTailLongerThanOneReadBlockIsCutToo) {
+    test::TempDir tmp;
+    const auto dir = tmp.path / "results";
+    const auto a = part("A-1", 3, 60.0);
+    {
+        auto log = results::ResultsLog::open({dir, false});
+        ASSERT_TRUE(log.ok());
+        for (int i = 1; i <= 100; ++i)
+            ASSERT_TRUE(
+                log->append({kNoon, static_cast<std::uint64_t>(i), &a, "v", "h", std::nullopt})
+                    .ok());
+    }
+    const auto jsonl = dir / (results::local_date(kNoon) + ".jsonl");
+    ASSERT_GT(std::filesystem::file_size(jsonl), 100'000u);  // the file spans several blocks
+    std::ofstream(jsonl, std::ios::app) << std::string(150'000, 'x');  // no line break
+    auto log = results::ResultsLog::open({dir, false});
+    ASSERT_TRUE(log.ok());
+    ASSERT_TRUE(log->append({kNoon, 101, &a, "v", "h", std::nullopt}).ok());
+    const auto js = lines(jsonl);
+    ASSERT_EQ(js.size(), 101u);
+    for (const auto& l : js) EXPECT_TRUE(nlohmann::json::accept(l)) << l.substr(0, 80);
+    EXPECT_EQ(lines(log->last_csv()).size(), 102u);  // the header was found again: not repeated
+}
+
 TEST(ResultsLog, AFullDiskIsAnErrorAndLeavesNoHalfLine) {
     test::TempDir tmp;
     const auto dir = tmp.path / "results";

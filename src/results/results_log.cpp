@@ -4,11 +4,13 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <ctime>
 #include <nlohmann/json.hpp>
+#include <string_view>
 
 #include "hotgauge/core/log.hpp"
 
@@ -154,23 +156,40 @@ core::Result<ResultsLog::OpenFile*> ResultsLog::file(const std::filesystem::path
     OpenFile f{fd, {}};
     struct stat st {};
     if (::fstat(fd, &st) == 0 && st.st_size > 0) {
-        // The header is the first line; a torn tail is whatever follows the last '\n'.
-        std::string text(static_cast<std::size_t>(st.st_size), '\0');
-        if (::pread(fd, text.data(), text.size(), 0) == static_cast<ssize_t>(text.size())) {
-            const auto last_nl = text.rfind('\n');
-            const auto keep = last_nl == std::string::npos ? 0 : last_nl + 1;
-            if (keep < text.size()) {
-                log().warn("{}: cut a torn last line of {} bytes (a write was interrupted)",
-                           path.string(), text.size() - keep);
-                if (::ftruncate(fd, static_cast<off_t>(keep)) != 0) {
-                    const int e = errno;
-                    ::close(fd);
-                    return core::make_error(path.string() + ": cannot repair: " + errno_text(e));
-                }
+        // Where the last whole line ends: read back from the end a block at a time (a day's JSON
+        // file grows to tens of megabytes; only its tail is read). Unreadable: left as it is.
+        const off_t size = st.st_size;
+        std::string block(1 << 16, '\0');
+        off_t keep = 0;
+        for (off_t end = size; end > 0;) {
+            const off_t start = std::max<off_t>(0, end - static_cast<off_t>(block.size()));
+            const auto n = static_cast<std::size_t>(end - start);
+            if (::pread(fd, block.data(), n, start) != static_cast<ssize_t>(n)) {
+                keep = size;
+                break;
             }
-            const auto first_nl = text.find('\n');
-            if (first_nl != std::string::npos && first_nl < keep)
-                f.header = text.substr(0, first_nl);
+            const auto nl = std::string_view(block.data(), n).rfind('\n');
+            if (nl != std::string_view::npos) {
+                keep = start + static_cast<off_t>(nl) + 1;
+                break;
+            }
+            end = start;
+        }
+        if (keep < size) {
+            log().warn("{}: cut a torn last line of {} bytes (a write was interrupted)",
+                       path.string(), size - keep);
+            if (::ftruncate(fd, keep) != 0) {
+                const int e = errno;
+                ::close(fd);
+                return core::make_error(path.string() + ": cannot repair: " + errno_text(e));
+            }
+        }
+        // The header is the first line.
+        const auto head =
+            static_cast<std::size_t>(std::min<off_t>(keep, static_cast<off_t>(block.size())));
+        if (head > 0 && ::pread(fd, block.data(), head, 0) == static_cast<ssize_t>(head)) {
+            const auto nl = std::string_view(block.data(), head).find('\n');
+            if (nl != std::string_view::npos) f.header = block.substr(0, nl);
         }
     }
     if (!existed && config_.sync) {  // the new name must survive a power cut too
