@@ -163,6 +163,10 @@ core::Result<std::unique_ptr<Camera>> Camera::open(const CameraConfig& c) {
 }
 
 core::Result<void> Camera::start() {
+    // Frames left over from the last acquisition (completed after its scan ended) belong to
+    // another scan, with timestamps from before this one: back to the pool, unread.
+    while (ArvBuffer* b = arv_stream_try_pop_buffer(impl_->stream))
+        arv_stream_push_buffer(impl_->stream, b);
     GError* e = nullptr;
     arv_camera_start_acquisition(impl_->camera, &e);
     if (e) return core::make_error(impl_->name + ": cannot start acquisition: " + take(e));

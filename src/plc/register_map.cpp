@@ -66,6 +66,8 @@ const char* to_string(ErrorCode e) {
             return "timeout";
         case ErrorCode::kInternal:
             return "internal error";
+        case ErrorCode::kNotStored:
+            return "result not stored";
     }
     return "?";
 }

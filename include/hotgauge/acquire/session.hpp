@@ -70,6 +70,9 @@ class CameraSession {
     core::Result<ScanOutcome> scan(double seconds, std::optional<double> temperature_c,
                                    const std::function<void()>& on_started = {});
 
+    // The face geometry and scan settings of the next scan (the daemon scans face after face).
+    void set_scan_config(ScanConfig scan) { scan_config_ = std::move(scan); }
+    const ScanConfig& scan_config() const { return scan_config_; }
     bool connected() const { return camera_ != nullptr; }
     int failures_in_a_row() const { return failures_; }
     // Time until the next open attempt is allowed (0 when allowed now).

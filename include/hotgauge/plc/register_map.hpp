@@ -89,6 +89,7 @@ enum class ErrorCode : std::uint16_t {
     kDeviceLost = 203,     // camera, accelerometer or pyrometer gone
     kTimeout = 204,        // the cycle took too long
     kInternal = 205,       // a bug: an invalid result was published
+    kNotStored = 206,      // the results files could not be written (disk full): not published
 };
 
 enum class WordOrder { kBigEndian, kLittleEndian };  // high word first / low word first

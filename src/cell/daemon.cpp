@@ -1,0 +1,729 @@
+#include "hotgauge/cell/daemon.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <fstream>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include "hotgauge/accel/ring.hpp"
+#include "hotgauge/accel/source.hpp"
+#include "hotgauge/cell/axis.hpp"
+#include "hotgauge/cell/journal.hpp"
+#include "hotgauge/io/model_io.hpp"
+#include "hotgauge/io/recipe.hpp"
+#include "hotgauge/measure/features.hpp"
+#include "hotgauge/pipeline/pipeline.hpp"
+#include "hotgauge/plc/pyrometer.hpp"
+#include "hotgauge/plc/server.hpp"
+#include "hotgauge/results/archive.hpp"
+#include "hotgauge/results/results_log.hpp"
+#include "hotgauge/vcell/render.hpp"
+#include "queue.hpp"
+
+namespace hotgauge::cell {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+using std::chrono::milliseconds;
+
+constexpr milliseconds kLoopPeriod{100};  // control and worker loops: beat at least this often
+constexpr double kMarginSlackS = 0.02;
+
+std::int64_t now_ns() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+}
+
+double ms_between(Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+std::string iso8601_utc(std::int64_t t_ns) {
+    const std::time_t t = static_cast<std::time_t>(t_ns / 1'000'000'000);
+    std::tm tm{};
+    gmtime_r(&t, &tm);
+    char buf[32];
+    std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+    return buf;
+}
+
+std::uint16_t code(plc::ErrorCode e) { return static_cast<std::uint16_t>(e); }
+
+// The PLC's face register → the cell's face name (docs/plc-modbus.md).
+const char* face_name(plc::Face f) {
+    switch (f) {
+        case plc::Face::kTop:
+            return "top";
+        case plc::Face::kBottom:
+            return "bottom";
+        case plc::Face::kSide1:
+            return "side1";
+        case plc::Face::kSide2:
+            return "side2";
+        case plc::Face::kAll:
+            break;
+    }
+    return "";
+}
+
+// The faces to scan: all faces the recipe's features need, in the configured order; or the one
+// face the PLC asked for.
+std::vector<std::string> faces_to_scan(const Setup& s, const core::Recipe& recipe, plc::Face f) {
+    if (f != plc::Face::kAll) return {face_name(f)};
+    std::set<std::string> needed;
+    for (const auto& feature : recipe.features)
+        needed.insert(feature.faces.begin(), feature.faces.end());
+    std::vector<std::string> out;
+    for (const auto& name : s.config.faces)
+        if (needed.count(name)) out.push_back(name);
+    return out;
+}
+
+// The last sequence number in the results files, so numbering continues across restarts.
+std::uint64_t last_sequence(const fs::path& dir) {
+    std::error_code ec;
+    std::vector<fs::path> days;
+    for (const auto& e : fs::directory_iterator(dir, ec))
+        if (e.path().extension() == ".jsonl") days.push_back(e.path());
+    std::sort(days.begin(), days.end());
+    for (auto it = days.rbegin(); it != days.rend(); ++it) {
+        std::ifstream in(*it);
+        std::string line, last;
+        while (std::getline(in, line))
+            if (!line.empty()) last = line;
+        if (last.empty()) continue;
+        const auto j = nlohmann::json::parse(last, nullptr, false);
+        if (j.is_object() && j.contains("sequence") && j["sequence"].is_number_unsigned())
+            return j["sequence"].get<std::uint64_t>();
+    }
+    return 0;
+}
+
+plc::Verdict to_plc(measure::Verdict v) {
+    switch (v) {
+        case measure::Verdict::kOk:
+            return plc::Verdict::kOk;
+        case measure::Verdict::kNok:
+            return plc::Verdict::kNok;
+        case measure::Verdict::kNotMeasured:
+            break;
+    }
+    return plc::Verdict::kNotMeasured;
+}
+
+// The measurement as the PLC sees it: the cold value of each feature (what the tolerance is on).
+plc::PartResult to_plc(const pipeline::PartResult& r) {
+    plc::PartResult out;
+    out.temperature_c = r.measurement.temperature_c;
+    for (const auto& f : r.measurement.features) {
+        plc::FeatureValue v;
+        v.name = f.name;
+        v.slot = f.slot;
+        v.verdict = to_plc(f.verdict);
+        if (v.verdict != plc::Verdict::kNotMeasured) v.value_mm = f.cold_mm;
+        if (!v.value_mm) v.verdict = plc::Verdict::kNotMeasured;
+        out.features.push_back(v);
+    }
+    out.overall = plc::overall_verdict(out.features, r.degraded);
+    return out;
+}
+
+std::string verdict_text(const pipeline::PartResult& r) {
+    const plc::PartResult p = to_plc(r);
+    return plc::to_string(p.overall);
+}
+
+}  // namespace
+
+core::Result<std::shared_ptr<const Setup>> load_setup(const fs::path& config_file) {
+    auto config = read_daemon_config(config_file);
+    if (!config) return config.error();
+    auto s = std::make_shared<Setup>();
+    s->config = std::move(*config);
+    auto cell = sim::read_cell_config(s->config.cell_file);
+    if (!cell) return cell.error();
+    s->cell = std::move(*cell);
+    for (const auto& name : s->config.faces) {
+        const bool known = std::any_of(s->cell.faces.begin(), s->cell.faces.end(),
+                                       [&](const auto& f) { return f.name == name; });
+        if (!known)
+            return core::make_error(s->config.file.string() + ": faces: '" + name +
+                                    "' is not a face of " + s->config.cell_file.string());
+    }
+    for (const auto& [slot, path] : s->config.recipes) {
+        auto recipe = io::read_recipe(path);
+        if (!recipe) return recipe.error();
+        std::shared_ptr<const match::Model> model;
+        if (auto m = s->config.models.find(slot); m != s->config.models.end()) {
+            auto loaded = io::read_model(m->second);
+            if (!loaded) return loaded.error();
+            if (loaded->name != recipe->name)
+                return core::make_error(m->second.string() + ": model of part '" + loaded->name +
+                                        "', recipe slot " + std::to_string(slot) + " is '" +
+                                        recipe->name + "'");
+            model = std::make_shared<match::Model>(std::move(*loaded));
+        } else {
+            match::ModelConfig mc;
+            mc.sampling_mm = recipe->matching.sampling_mm;
+            auto built = match::model_from_recipe(*recipe, mc);
+            if (!built)
+                return core::make_error(path.string() + ": part model: " + built.error().message);
+            model = std::make_shared<match::Model>(std::move(*built));
+        }
+        s->models.emplace(slot, std::move(model));
+        s->recipes.emplace(slot, std::move(*recipe));
+    }
+    auto tri = vcell::sensor_triangulation(s->cell.sensor);
+    if (!tri) return core::make_error(s->config.cell_file.string() + ": " + tri.error().message);
+    s->triangulation.emplace(std::move(*tri));
+    auto table = acquire::ExposureTable::create(s->config.acquisition.exposure_table);
+    if (!table)
+        return core::make_error(s->config.file.string() +
+                                ": camera.exposure_table: " + table.error().message);
+    s->exposure = std::move(*table);
+    return std::shared_ptr<const Setup>(std::move(s));
+}
+
+std::string describe(const Setup& s) {
+    std::ostringstream o;
+    const auto& c = s.config;
+    o << "config " << c.file.string() << " (hash " << c.hash << ")\n";
+    o << "  cell " << c.cell_file.string() << ": faces";
+    for (const auto& f : c.faces) o << " " << f;
+    o << "\n";
+    for (const auto& [slot, r] : s.recipes)
+        o << "  recipe slot " << slot << ": " << r.name << " (" << r.features.size()
+          << " features), model " << s.models.at(slot)->refs.size() << " references\n";
+    o << "  camera " << c.acquisition.camera.id << " (" << c.acquisition.scan.frame_mode
+      << " mode), " << c.acquisition.scan_s << " s per face\n";
+    o << "  accelerometer "
+      << (c.accelerometer ? (c.accelerometer->kind == accel::AccelSourceKind::udp
+                                 ? "udp " + c.accelerometer->udp.bind
+                                 : "iio " + c.accelerometer->iio.device_dir.string())
+                          : std::string("none (no compensation)"))
+      << "\n";
+    o << "  axis " << c.axis.kind << (c.axis.kind == "modbus" ? " " + c.axis.address : "") << "\n";
+    o << "  PLC Modbus TCP " << c.plc.bind_address << ":" << c.plc.port << "\n";
+    o << "  pyrometer " << (c.pyrometer ? c.pyrometer->serial.device : "none") << "\n";
+    o << "  results " << c.results.dir.string() << ", archive " << c.archive.dir.string() << "\n";
+    return o.str();
+}
+
+// One trigger on its way through the cell.
+struct Job {
+    std::uint64_t sequence = 0;
+    plc::TriggerRequest trigger;
+    std::shared_ptr<const Setup> setup;
+    const core::Recipe* recipe = nullptr;
+    std::vector<std::string> faces;
+};
+
+// What acquisition hands to processing: the recording, or why there is none.
+struct Captured {
+    Job job;
+    core::Recording rec;
+    std::uint16_t fault = 0;  // plc::ErrorCode when the part could not be scanned
+    std::string failure;
+    std::int64_t last_profile_ns = 0;
+    double accel_wait_ms = 0;
+    std::vector<std::string> degraded;  // found while scanning (temperature unknown, ...)
+};
+
+struct Daemon::Impl {
+    std::shared_ptr<const Setup> setup;  // control thread; jobs carry their own
+    Supervisor sup;
+    std::unique_ptr<accel::AccelRing> ring;
+    std::unique_ptr<accel::AccelSource> accel;
+    std::unique_ptr<plc::Pyrometer> pyrometer;
+    std::unique_ptr<plc::Server> server;
+
+    detail::BoundedQueue<Job> jobs{1};
+    detail::BoundedQueue<Captured> captured{2};
+    std::thread acquisition_thread, processing_thread;
+    std::atomic<bool> stop{false}, reload{false}, workers_stop{false};
+    std::atomic<std::uint64_t> in_flight{0};              // jobs not yet finished
+    std::atomic<std::uint64_t> abandoned{0};              // sequence the PLC reset; 0 = none
+    std::atomic<std::int64_t> acq_beat{0}, proc_beat{0};  // steady ns of the last loop step
+    bool shut_down = false;
+
+    mutable std::mutex stats_mutex;
+    DaemonStats stats;
+
+    // Acquisition thread only.
+    std::shared_ptr<const Setup> acq_setup;
+    std::unique_ptr<acquire::CameraSession> session;
+    std::unique_ptr<ModbusAxis> axis;
+    // Processing thread only.
+    std::shared_ptr<const Setup> proc_setup;
+    std::optional<results::ResultsLog> log;
+    std::optional<results::RawArchive> archive;
+    std::string log_error;  // why the results files could not be opened
+
+    static std::int64_t steady_ns() {
+        return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
+            .count();
+    }
+    void set_state(const std::string& s) {
+        {
+            std::lock_guard lock(stats_mutex);
+            if (stats.state == s) return;
+            stats.state = s;
+        }
+        if (sup.status) sup.status(s);
+    }
+
+    void control_loop();
+    void on_event(const plc::PlcEvent& ev);
+    void apply_reload();
+    bool healthy() const;
+    void shutdown();
+
+    void acquisition_loop();
+    Captured acquire_part(Job job);
+    void prepare_acquisition(const std::shared_ptr<const Setup>& s);
+    void processing_loop();
+    void process(Captured c);
+    void prepare_results(const std::shared_ptr<const Setup>& s);
+    void finish_failed(Captured& c, pipeline::PartResult& r);
+};
+
+// ---- control -------------------------------------------------------------------------------
+
+void Daemon::Impl::control_loop() {
+    set_state("idle: waiting for a trigger");
+    while (!stop) {
+        if (auto ev = server->wait_event(kLoopPeriod)) on_event(*ev);
+        if (reload && in_flight == 0) apply_reload();
+        if (healthy() && sup.watchdog) sup.watchdog();
+        if (in_flight == 0) {
+            const auto st = server->state();
+            set_state(st == plc::State::kFault ? "fault: waiting for the PLC's reset"
+                                               : "idle: waiting for a trigger");
+        }
+    }
+}
+
+void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
+    if (ev.kind == plc::PlcEvent::Kind::kReset) {
+        if (in_flight > 0) {
+            std::lock_guard lock(stats_mutex);
+            abandoned = stats.next_sequence - 1;
+            spdlog::warn("PLC reset during part sequence {}: the cycle is abandoned",
+                         abandoned.load());
+        }
+        return;
+    }
+    const plc::TriggerRequest& t = ev.trigger;
+    Job job;
+    job.trigger = t;
+    job.setup = setup;
+    {
+        std::lock_guard lock(stats_mutex);
+        job.sequence = stats.next_sequence++;
+        ++stats.triggers;
+    }
+    const auto r = setup->recipes.find(t.recipe_slot);
+    if (r == setup->recipes.end()) {
+        log_part({job.sequence, std::to_string(t.part_id), "slot " + std::to_string(t.recipe_slot),
+                  "FAULT",
+                  "part " + std::to_string(t.part_id) + " (seq " + std::to_string(job.sequence) +
+                      "): no recipe in slot " + std::to_string(t.recipe_slot) + ": PLC fault 202",
+                  true});
+        server->fault(code(plc::ErrorCode::kUnknownRecipe));
+        std::lock_guard lock(stats_mutex);
+        ++stats.failed;
+        return;
+    }
+    job.recipe = &r->second;
+    job.faces = faces_to_scan(*setup, r->second, t.face);
+    ++in_flight;
+    set_state("busy: part " + std::to_string(t.part_id) + " (seq " + std::to_string(job.sequence) +
+              ")");
+    if (!jobs.try_push(std::move(job))) {  // the handshake allows one cycle at a time
+        --in_flight;
+        spdlog::error("trigger while a part is queued: PLC fault 205");
+        server->fault(code(plc::ErrorCode::kInternal));
+    }
+}
+
+void Daemon::Impl::apply_reload() {
+    reload = false;
+    const fs::path file = setup->config.file;
+    spdlog::info("reloading {}", file.string());
+    auto next = load_setup(file);
+    if (!next) {
+        spdlog::error("reload REJECTED, the running configuration is kept: {}",
+                      next.error().message);
+        if (sup.status) sup.status("reload rejected: " + next.error().message);
+        std::lock_guard lock(stats_mutex);
+        ++stats.rejected_reloads;
+        return;
+    }
+    const auto& a = setup->config;
+    const auto& b = (*next)->config;
+    // These run for the whole life of the process; a change needs a restart.
+    if (a.plc.port != b.plc.port || a.plc.bind_address != b.plc.bind_address)
+        spdlog::warn("reload: the PLC server's address changes only at a restart");
+    if (a.accelerometer.has_value() != b.accelerometer.has_value() ||
+        (a.pyrometer.has_value() != b.pyrometer.has_value()))
+        spdlog::warn("reload: accelerometer and pyrometer sources change only at a restart");
+    setup = std::move(*next);
+    spdlog::info("reloaded: config hash {}\n{}", setup->config.hash, describe(*setup));
+    std::lock_guard lock(stats_mutex);
+    ++stats.reloads;
+}
+
+bool Daemon::Impl::healthy() const {
+    // A worker that has not come round its loop for longer than its longest step (a face's scan
+    // and an axis move, or the pipeline) is stuck: the watchdog then lets systemd restart us.
+    const auto& c = setup->config;
+    const double limit_s = c.acquisition.scan_s + c.axis.timeout_ms * 1e-3 +
+                           c.acquisition.camera.timeout_ms * 1e-3 * 10 + 30.0;
+    const auto limit_ns = static_cast<std::int64_t>(limit_s * 1e9);
+    const std::int64_t now = steady_ns();
+    return now - acq_beat < limit_ns && now - proc_beat < limit_ns;
+}
+
+void Daemon::Impl::shutdown() {
+    if (shut_down) return;
+    shut_down = true;
+    if (sup.stopping) sup.stopping("stopping");
+    // Workers finish (or fail, and report) the part in progress, then leave.
+    const auto deadline = Clock::now() + std::chrono::seconds(60);
+    while (in_flight > 0 && Clock::now() < deadline) {
+        if (auto ev = server->wait_event(kLoopPeriod);
+            ev && ev.value().kind == plc::PlcEvent::Kind::kTrigger)
+            server->fault(code(plc::ErrorCode::kDeviceLost));  // no new part while stopping
+    }
+    workers_stop = true;
+    if (acquisition_thread.joinable()) acquisition_thread.join();
+    if (processing_thread.joinable()) processing_thread.join();
+    if (accel) accel->stop();
+}
+
+// ---- acquisition ---------------------------------------------------------------------------
+
+void Daemon::Impl::prepare_acquisition(const std::shared_ptr<const Setup>& s) {
+    if (acq_setup == s) return;
+    const bool camera_changed =
+        !acq_setup || acq_setup->config.acquisition.camera.id != s->config.acquisition.camera.id;
+    acq_setup = s;
+    const auto& a = s->config.acquisition;
+    if (camera_changed || !session)
+        session = std::make_unique<acquire::CameraSession>(a.camera, a.scan, *s->triangulation,
+                                                           s->exposure);
+    axis = s->config.axis.kind == "modbus" ? std::make_unique<ModbusAxis>(s->config.axis) : nullptr;
+}
+
+void Daemon::Impl::acquisition_loop() {
+    while (!workers_stop) {
+        acq_beat = steady_ns();
+        auto job = jobs.pop(kLoopPeriod);
+        if (!job) continue;
+        Captured c = acquire_part(std::move(*job));
+        acq_beat = steady_ns();
+        if (!captured.try_push(std::move(c)))  // cannot happen: one part at a time
+            spdlog::error("processing queue full: a part is lost (bug)");
+    }
+}
+
+Captured Daemon::Impl::acquire_part(Job next) {
+    Captured c;
+    c.job = std::move(next);
+    const Job& job = c.job;
+    const Setup& s = *job.setup;
+    prepare_acquisition(job.setup);
+    c.rec.part_id = std::to_string(job.trigger.part_id);
+    c.rec.recipe = job.recipe->name;
+    c.rec.captured_at = iso8601_utc(now_ns());
+    auto fail = [&](plc::ErrorCode e, const std::string& why) {
+        c.fault = code(e);
+        c.failure = why;
+        c.rec.faces.clear();
+    };
+    if (pyrometer) {
+        const plc::PyrometerReading t = pyrometer->latest();
+        if (t.valid())
+            c.rec.temperature_c = t.temperature_c;
+        else
+            c.degraded.push_back("part temperature unknown: pyrometer " +
+                                 (t.last_error.empty()
+                                      ? std::string(t.stale ? "stale" : "out of range")
+                                      : t.last_error));
+    }
+    // The accelerometer is recorded a little beyond the margins the compensation needs, so that
+    // the sample grid's phase never leaves a face a fraction of a period short.
+    const double margin_s = s.config.accel_margin_s + kMarginSlackS;
+    std::int64_t t_free_ns = 0;  // the axis may move from then on
+    for (const auto& name : job.faces) {
+        if (abandoned == job.sequence || stop) {
+            fail(plc::ErrorCode::kMeasurementFailed,
+                 stop ? "daemon stopping (SIGTERM)" : "cycle reset by the PLC");
+            break;
+        }
+        const auto face = std::find_if(s.cell.faces.begin(), s.cell.faces.end(),
+                                       [&](const auto& f) { return f.name == name; });
+        if (face == s.cell.faces.end()) {
+            fail(plc::ErrorCode::kMeasurementFailed, "no face '" + name + "' in the cell");
+            break;
+        }
+        if (axis) {
+            const auto pos = s.config.axis.faces.find(name);
+            if (pos == s.config.axis.faces.end()) {
+                fail(plc::ErrorCode::kMeasurementFailed,
+                     "axis: no position for face '" + name + "' in the config");
+                break;
+            }
+            // The accelerometer's record of the last face runs a margin past its scan; the
+            // move's jolt must stay out of it, and out of the next face's record before it.
+            if (accel && t_free_ns > now_ns())
+                std::this_thread::sleep_for(std::chrono::nanoseconds(t_free_ns - now_ns()));
+            auto moved = axis->move_to(pos->second);
+            if (!moved) {
+                fail(plc::ErrorCode::kDeviceLost, moved.error().message);
+                break;
+            }
+            if (accel && *moved)
+                std::this_thread::sleep_for(std::chrono::duration<double>(margin_s));
+        }
+        acquire::ScanConfig sc = s.config.acquisition.scan;
+        sc.face = name;
+        sc.T_world_camera = face->T_world_camera;
+        sc.scan_direction = face->scan_direction;
+        sc.R_camera_accel = face->R_camera_accel;
+        session->set_scan_config(sc);
+        acq_beat = steady_ns();
+        auto out = session->scan(s.config.acquisition.scan_s, c.rec.temperature_c);
+        acq_beat = steady_ns();
+        if (!out) {
+            fail(plc::ErrorCode::kDeviceLost, "face " + name + ": " + out.error().message);
+            break;
+        }
+        c.rec.faces.push_back(std::move(out->face));
+        t_free_ns =
+            c.rec.faces.back().profile_times_ns.back() + static_cast<std::int64_t>(margin_s * 1e9);
+    }
+    if (c.fault || c.rec.faces.empty()) {
+        if (!c.fault) fail(plc::ErrorCode::kMeasurementFailed, "no face to scan");
+        return c;
+    }
+    c.last_profile_ns = c.rec.faces.back().profile_times_ns.back();
+    if (accel) {
+        // The compensation needs the accelerometer record a margin past the last profile.
+        const auto t0 = Clock::now();
+        const auto margin_ns = static_cast<std::int64_t>(margin_s * 1e9);
+        ring->wait_for(c.last_profile_ns + margin_ns,
+                       milliseconds(static_cast<long long>(500 + 1000 * margin_s)));
+        c.accel_wait_ms = ms_between(t0, Clock::now());
+        for (auto& f : c.rec.faces) {
+            const accel::AccelWindow w = ring->copy_range(f.profile_times_ns.front() - margin_ns,
+                                                          f.profile_times_ns.back() + margin_ns);
+            for (const auto& smp : w.samples) {
+                f.accel_times_ns.push_back(smp.t_ns);
+                f.accel_mps2.insert(f.accel_mps2.end(), {smp.x_mps2, smp.y_mps2, smp.z_mps2});
+            }
+        }
+    }
+    return c;
+}
+
+// ---- processing ----------------------------------------------------------------------------
+
+void Daemon::Impl::prepare_results(const std::shared_ptr<const Setup>& s) {
+    if (proc_setup && proc_setup->config.results.dir == s->config.results.dir &&
+        proc_setup->config.archive.dir == s->config.archive.dir &&
+        proc_setup->config.archive.quota_bytes == s->config.archive.quota_bytes &&
+        proc_setup->config.archive.every_nth_ok == s->config.archive.every_nth_ok && log) {
+        proc_setup = s;
+        return;
+    }
+    proc_setup = s;
+    log.reset();
+    archive.reset();
+    auto l = results::ResultsLog::open(s->config.results);
+    if (!l) {
+        log_error = l.error().message;
+    } else {
+        log.emplace(std::move(*l));
+        log_error.clear();
+    }
+    if (auto a = results::RawArchive::open(s->config.archive); a)
+        archive.emplace(std::move(*a));
+    else
+        spdlog::error("raw archive: {}", a.error().message);
+}
+
+void Daemon::Impl::processing_loop() {
+    while (!workers_stop || captured.size() > 0) {
+        proc_beat = steady_ns();
+        auto c = captured.pop(kLoopPeriod);
+        if (!c) continue;
+        process(std::move(*c));
+        proc_beat = steady_ns();
+        --in_flight;
+    }
+}
+
+void Daemon::Impl::process(Captured c) {
+    const Job& job = c.job;
+    prepare_results(job.setup);
+    const auto t0 = Clock::now();
+    pipeline::PartResult r;
+    if (c.fault) {
+        r.part_id = c.rec.part_id;
+        r.recipe = c.rec.recipe;
+        r.captured_at = c.rec.captured_at;
+        r.measurement = measure::unmeasured(*job.recipe, c.rec, c.failure);
+        r.measurement.temperature_c = c.rec.temperature_c;
+        r.warnings.push_back(c.failure);
+    } else {
+        pipeline::PipelineOptions opt;
+        opt.model = job.setup->models.at(job.trigger.recipe_slot).get();
+        opt.compensate = true;
+        opt.compensation.clock_offset_s = 0.0;
+        r = pipeline::run(c.rec, *job.recipe, opt);
+        for (const auto& why : c.degraded) {
+            r.degraded = true;
+            r.degraded_reasons.push_back(why);
+        }
+        if (c.accel_wait_ms > 0)
+            r.stage_ms.emplace(r.stage_ms.begin(), "accel_wait", c.accel_wait_ms);
+    }
+    const double pipeline_ms = ms_between(t0, Clock::now());
+    const auto t1 = Clock::now();
+    const std::int64_t t_result = now_ns();
+    results::ResultEntry entry;
+    entry.time_ns = t_result;
+    entry.sequence = job.sequence;
+    entry.result = &r;
+    entry.software_version = HOTGAUGE_VERSION;
+    entry.config_hash = job.setup->config.hash;
+    if (!c.fault && archive && archive->wants(r, job.sequence)) {
+        if (auto where = archive->store(c.rec, job.sequence, t_result); where)
+            entry.archived_as = where->string();
+        else
+            spdlog::error("seq {}: raw archive: {}", job.sequence, where.error().message);
+    }
+    core::Result<void> stored =
+        log ? log->append(entry) : core::Result<void>(core::make_error(log_error));
+    const double store_ms = ms_between(t1, Clock::now());
+
+    // Registers last: a result the PLC can acknowledge is already on disk.
+    std::string outcome;
+    bool problem = true;
+    if (!stored) {
+        spdlog::error("seq {}: results NOT stored: {}; the result is only in this log: {}",
+                      job.sequence, stored.error().message, pipeline::to_json(r));
+        server->fault(code(plc::ErrorCode::kNotStored));
+        outcome = "FAULT 206 (result not stored: " + stored.error().message + ")";
+    } else if (c.fault) {
+        server->fault(c.fault);
+        outcome = "FAULT " + std::to_string(c.fault) + " (" +
+                  plc::to_string(static_cast<plc::ErrorCode>(c.fault)) + "): " + c.failure;
+    } else if (auto ok = server->finish(job.trigger.trigger_id, to_plc(r)); !ok) {
+        outcome = verdict_text(r) + ", not published: " + ok.error().message;
+    } else {
+        outcome = verdict_text(r);
+        problem = r.measurement.verdict != measure::Verdict::kOk || r.degraded;
+    }
+    const std::int64_t published = now_ns();
+    {
+        std::lock_guard lock(stats_mutex);
+        PartTiming t;
+        t.sequence = job.sequence;
+        t.last_profile_ns = c.last_profile_ns;
+        t.published_ns = published;
+        t.accel_wait_ms = c.accel_wait_ms;
+        t.pipeline_ms = pipeline_ms;
+        t.store_ms = store_ms;
+        stats.last = t;
+        ++(c.fault || !stored ? stats.failed : stats.measured);
+    }
+    std::ostringstream msg;
+    msg << "part " << r.part_id << " seq " << job.sequence << " recipe " << r.recipe << ": "
+        << outcome;
+    if (c.last_profile_ns)
+        msg << "; " << (published - c.last_profile_ns) / 1'000'000 << " ms after the last profile";
+    for (const auto& why : r.degraded_reasons) msg << "; degraded: " << why;
+    if (stored) msg << "; " << log->last_csv().string();
+    log_part({job.sequence, r.part_id, r.recipe, outcome.substr(0, outcome.find(' ')), msg.str(),
+              problem});
+}
+
+// ---- Daemon --------------------------------------------------------------------------------
+
+Daemon::Daemon(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
+Daemon::~Daemon() {
+    impl_->stop = true;
+    impl_->shutdown();
+}
+
+core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup> setup,
+                                                    Supervisor supervisor) {
+    auto impl = std::make_unique<Impl>();
+    impl->setup = setup;
+    impl->sup = std::move(supervisor);
+    const DaemonConfig& c = setup->config;
+    impl->stats.next_sequence = last_sequence(c.results.dir) + 1;
+    if (c.accelerometer) {
+        // Room for a whole part: every face, the moves and the margins, twice over.
+        const double part_s = static_cast<double>(c.faces.size()) *
+                                  (c.acquisition.scan_s + c.axis.timeout_ms * 1e-3) +
+                              4 * c.accel_margin_s;
+        impl->ring = std::make_unique<accel::AccelRing>(accel::AccelRingConfig{
+            .capacity_s = 2 * part_s + 10.0, .sample_rate_hz = 4000.0, .gap_periods = 3.0});
+        auto src = accel::make_accel_source(*c.accelerometer, *impl->ring);
+        if (!src) return core::make_error("accelerometer: " + src.error().message);
+        impl->accel = std::move(*src);
+        if (auto ok = impl->accel->start(); !ok)
+            return core::make_error("accelerometer: " + ok.error().message);
+    }
+    if (c.pyrometer) {
+        auto p = plc::Pyrometer::start(*c.pyrometer);
+        if (!p) return core::make_error("pyrometer: " + p.error().message);
+        impl->pyrometer = std::move(*p);
+    }
+    auto server = plc::Server::start(c.plc);
+    if (!server) return server.error();
+    impl->server = std::move(*server);
+    // The camera: opened now so that the first part does not wait; if it is not there, the
+    // first trigger tries again (and fails that part with the reason if it still is not).
+    impl->prepare_acquisition(setup);
+    if (auto ok = impl->session->connect(); !ok)
+        spdlog::warn("camera {}: {} (retried at the first trigger)", c.acquisition.camera.id,
+                     ok.error().message);
+    impl->prepare_results(setup);
+    if (!impl->log) spdlog::error("results: {}", impl->log_error);
+    impl->acq_beat = impl->proc_beat = Impl::steady_ns();
+    Impl* raw = impl.get();
+    impl->acquisition_thread = std::thread([raw] { raw->acquisition_loop(); });
+    impl->processing_thread = std::thread([raw] { raw->processing_loop(); });
+    spdlog::info("hotgauged {} up: PLC on port {}, next sequence {}\n{}", HOTGAUGE_VERSION,
+                 impl->server->port(), impl->stats.next_sequence, describe(*setup));
+    if (impl->sup.ready) impl->sup.ready();
+    return std::unique_ptr<Daemon>(new Daemon(std::move(impl)));
+}
+
+void Daemon::run() {
+    impl_->control_loop();
+    impl_->shutdown();
+}
+
+void Daemon::request_stop() { impl_->stop = true; }
+void Daemon::request_reload() { impl_->reload = true; }
+int Daemon::plc_port() const { return impl_->server->port(); }
+
+DaemonStats Daemon::stats() const {
+    std::lock_guard lock(impl_->stats_mutex);
+    return impl_->stats;
+}
+
+}  // namespace hotgauge::cell
