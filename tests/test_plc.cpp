@@ -39,6 +39,7 @@
 #include "hotgauge/plc/pyrometer.hpp"
 #include "hotgauge/plc/register_map.hpp"
 #include "hotgauge/plc/server.hpp"
+#include "serial_pair.hpp"
 #include "temp_dir.hpp"
 
 using namespace hotgauge::plc;
@@ -1097,43 +1098,8 @@ TEST(PyrometerConfig, OpeningAMissingDeviceNamesIt) {
 }
 
 // A virtual serial pair: socat linking two ptys (TMP/a <-> TMP/b).
-class SerialPair {
-  public:
-    SerialPair() {
-        a_ = (dir_.path / "a").string();
-        b_ = (dir_.path / "b").string();
-        const std::string l1 = "pty,raw,echo=0,link=" + a_;
-        const std::string l2 = "pty,raw,echo=0,link=" + b_;
-        const char* argv[] = {"socat", "-d", "-d", l1.c_str(), l2.c_str(), nullptr};
-        posix_spawn_file_actions_t fa;
-        posix_spawn_file_actions_init(&fa);
-        posix_spawn_file_actions_addopen(&fa, 2, "/dev/null", O_WRONLY, 0);
-        ok_ = posix_spawnp(&pid_, "socat", &fa, nullptr, const_cast<char**>(argv), environ) == 0;
-        posix_spawn_file_actions_destroy(&fa);
-        ok_ = ok_ && eventually([&] {
-                  return std::filesystem::exists(a_) && std::filesystem::exists(b_);
-              });
-    }
-    ~SerialPair() {
-        if (pid_ > 0) {
-            ::kill(pid_, SIGTERM);
-            int status = 0;
-            ::waitpid(pid_, &status, 0);
-        }
-    }
-    bool ok() const { return ok_; }
-    const std::string& a() const { return a_; }
-    const std::string& b() const { return b_; }
-
-  private:
-    hotgauge::test::TempDir dir_;
-    std::string a_, b_;
-    pid_t pid_ = -1;
-    bool ok_ = false;
-};
-
 TEST(Pyrometer, ReadsFlagsOutOfRangeAndStaleAgainstASimulatedSensor) {
-    SerialPair pair;
+    hotgauge::test::SerialPair pair;
     ASSERT_TRUE(pair.ok()) << "socat did not come up";
     SerialConfig sc;
     sc.device = pair.a();
@@ -1186,7 +1152,7 @@ TEST(Pyrometer, ReadsFlagsOutOfRangeAndStaleAgainstASimulatedSensor) {
 }
 
 TEST(Pyrometer, WrongSlaveIdNeverReads) {
-    SerialPair pair;
+    hotgauge::test::SerialPair pair;
     ASSERT_TRUE(pair.ok()) << "socat did not come up";
     SerialConfig sc;
     sc.device = pair.a();

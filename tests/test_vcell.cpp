@@ -1,13 +1,21 @@
 // The virtual cell's parts against independent checks: rendered stripes against the extraction
 // with known centres, peak rows against their decoder, and the GigE Vision device against
 // Aravis (through acquire::Camera and acquire::CameraSession) on 127.0.0.4, in this process.
+// The conveyor's pyrometer runs over a socat virtual serial pair.
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <modbus.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -20,10 +28,13 @@
 #include "hotgauge/acquire/camera.hpp"
 #include "hotgauge/acquire/session.hpp"
 #include "hotgauge/io/recipe.hpp"
+#include "hotgauge/plc/pyrometer.hpp"
 #include "hotgauge/sim/scene.hpp"
 #include "hotgauge/vcell/gv_device.hpp"
 #include "hotgauge/vcell/render.hpp"
 #include "hotgauge/vcell/virtual_cell.hpp"
+#include "serial_pair.hpp"
+#include "temp_dir.hpp"
 
 namespace hotgauge {
 namespace {
@@ -448,6 +459,110 @@ TEST(VirtualCell, TheAxisMovesTheHeadToAnotherFaceOverModbus) {
     EXPECT_EQ(regs[2], 2);
     modbus_close(mb);
     modbus_free(mb);
+}
+
+// Polls `done` until it holds or `timeout` passes.
+bool eventually(const std::function<bool()>& done, std::chrono::milliseconds timeout) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (!done()) {
+        if (std::chrono::steady_clock::now() > deadline) return false;
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return true;
+}
+
+// A virtual serial pair: socat linking two ptys, DIR/a <-> DIR/b (as in test_plc.cpp).
+std::string read_text(const std::filesystem::path& p) {
+    std::ifstream f(p);
+    return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
+}
+
+TEST(VirtualCell, PartOffsetsFollowTheDocumentedFormula) {
+    sim::SimOptions base;
+    base.seed = 40;
+    base.temperature_c = 1000;
+    // d(n) = ((n − 1)·37 + 100) mod 201 − 100, written out for parts 1..12.
+    const double d[] = {0, 37, 74, -90, -53, -16, 21, 58, 95, -69, -32, 5};
+    for (int n = 1; n <= 12; ++n) {
+        const auto o = vcell::part_options(base, n);
+        EXPECT_EQ(o.seed, 40u + static_cast<std::uint64_t>(n - 1)) << "part " << n;
+        EXPECT_DOUBLE_EQ(o.temperature_c, 1000 + d[n - 1]) << "part " << n;
+    }
+    for (int n = 1; n <= 402; ++n)  // within ±100 °C for any n
+        EXPECT_LE(std::abs(vcell::part_options(base, n).temperature_c - 1000), 100.0);
+}
+
+// A scripted PLC loads part 3 through the axis controller's registers 6 and 7: its truth is on
+// disk when register 7 says so, the camera's part and the pyrometer follow.
+TEST(VirtualCell, APlcLoadsAnotherPartOverModbus) {
+    test::TempDir dir;
+    test::SerialPair serial;
+    ASSERT_TRUE(serial.ok()) << "socat did not come up";
+    const std::filesystem::path truth_dir = dir.path / "truth";
+    CellWithReceiver c;
+    ASSERT_NO_FATAL_FAILURE(c.start([&](vcell::VirtualCellConfig& vc) {
+        vc.axis_port = 0;
+        vc.part.seed = 7;
+        vc.part.temperature_c = 1000;
+        vc.truth_dir = truth_dir;
+        plc::SerialConfig sc;
+        sc.device = serial.a();
+        vc.pyrometer = sc;
+    }));
+    auto& vcell = *c.vcell;
+    EXPECT_EQ(vcell.part_loaded(), 1);  // part 1 is the configured part itself
+    EXPECT_DOUBLE_EQ(vcell.part_temperature_c(), 1000.0);
+    const sim::SimTruth first = vcell.truth();
+    EXPECT_DOUBLE_EQ(first.temperature_c, 1000.0);
+    EXPECT_TRUE(std::filesystem::exists(truth_dir / "part-0001" / "truth.yaml"));
+
+    plc::PyrometerConfig pc;
+    pc.serial.device = serial.b();
+    pc.poll_period_ms = 20;
+    pc.response_timeout_ms = 100;
+    auto pyro = plc::Pyrometer::start(pc);
+    ASSERT_TRUE(pyro) << pyro.error().message;
+    auto pyrometer_reads = [&](double t) {
+        return eventually(
+            [&] {
+                const auto r = (*pyro)->latest();
+                return r.temperature_c && std::abs(*r.temperature_c - t) < 0.051;
+            },
+            std::chrono::milliseconds(5000));
+    };
+    EXPECT_TRUE(pyrometer_reads(1000.0)) << (*pyro)->latest().last_error;
+
+    modbus_t* mb = modbus_new_tcp("127.0.0.1", vcell.axis_port());
+    ASSERT_NE(mb, nullptr);
+    ASSERT_EQ(modbus_connect(mb), 0);
+    std::uint16_t regs[2] = {};
+    ASSERT_EQ(modbus_read_registers(mb, 6, 2, regs), 2);
+    EXPECT_EQ(regs[0], 0);
+    EXPECT_EQ(regs[1], 1);
+    ASSERT_EQ(modbus_write_register(mb, 6, 3), 1);
+    ASSERT_EQ(modbus_read_registers(mb, 6, 2, regs), 2);
+    EXPECT_EQ(regs[0], 0);                                 // the request was taken
+    EXPECT_TRUE(regs[1] == 0 || regs[1] == 3) << regs[1];  // 0 while loading
+    const bool loaded =
+        eventually([&] { return modbus_read_registers(mb, 6, 2, regs) == 2 && regs[1] == 3; },
+                   std::chrono::milliseconds(20'000));
+    modbus_close(mb);
+    modbus_free(mb);
+    ASSERT_TRUE(loaded) << "register 7 reads " << regs[1];
+    // Read the moment register 7 says 3: the truth is complete.
+    const std::string yaml = read_text(truth_dir / "part-0003" / "truth.yaml");
+    EXPECT_NE(yaml.find("temperature_c: 1074\n"), std::string::npos) << yaml;
+    EXPECT_NE(yaml.find("features:"), std::string::npos);
+
+    // Part 3: seed 7 + 2, 1 000 °C + d(3) = (2·37 + 100) mod 201 − 100 = 74 °C.
+    EXPECT_EQ(vcell.part_loaded(), 3);
+    EXPECT_DOUBLE_EQ(vcell.part_temperature_c(), 1074.0);
+    const sim::SimTruth third = vcell.truth();
+    EXPECT_DOUBLE_EQ(third.temperature_c, 1074.0);
+    EXPECT_GT(third.growth, first.growth);
+    EXPECT_NE(third.levels_mm, first.levels_mm);  // another seed: another forging
+    EXPECT_FALSE(std::filesystem::exists(truth_dir / "part-0002"));
+    EXPECT_TRUE(pyrometer_reads(1074.0)) << (*pyro)->latest().last_error;
 }
 
 }  // namespace

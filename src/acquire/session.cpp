@@ -62,6 +62,12 @@ void CameraSession::lose(const std::string& why) {
 }
 
 core::Result<void> CameraSession::connect() {
+    if (camera_ && camera_->lost()) {
+        // It died between scans (power cycled, cable pulled, restarted): close it and open it
+        // again at once; the backoff is for attempts that fail.
+        lose("lost between scans");
+        next_attempt_ = Clock::now();
+    }
     if (camera_) return {};
     if (const auto wait = backoff_remaining(); wait.count() > 0)
         return core::make_error("camera unavailable (" + last_failure_ + "); next attempt in " +

@@ -8,6 +8,7 @@
 #include "commands.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/io/recording_io.hpp"
+#include "hotgauge/plc/pyrometer.hpp"
 #include "hotgauge/sim/simulator.hpp"
 #include "hotgauge/vcell/virtual_cell.hpp"
 
@@ -32,6 +33,7 @@ struct SimulateArgs {
     double line_rate_hz = 1000.0;
     double seconds = 0.0;
     bool multipart = false;
+    std::string pyrometer_device;  // "" = no pyrometer
 };
 
 // Serves the virtual cell until SIGINT/SIGTERM (or --seconds), then prints what it sent.
@@ -41,6 +43,11 @@ int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cel
     a.vc.cell = cell;
     a.vc.part = opt;
     a.vc.line_period_s = 1.0 / a.line_rate_hz;
+    if (!a.pyrometer_device.empty()) {
+        plc::SerialConfig serial;  // 9600 8N1, slave 1: the defaults
+        serial.device = a.pyrometer_device;
+        a.vc.pyrometer = serial;
+    }
     if (a.multipart) {
         a.vc.peaks.intensity = true;
         a.vc.device.multipart_parts = a.vc.peaks.rows_per_profile();
@@ -214,6 +221,11 @@ Command add_simulate(CLI::App& app) {
     s->add_option("--axis-port", a->vc.axis_port,
                   "serve: the robot/axis controller's Modbus TCP port (0: any, -1: none)")
         ->capture_default_str();
+    s->add_option("--truth-dir", a->vc.truth_dir,
+                  "serve: write each loaded part's ground truth to DIR/part-NNNN");
+    s->add_option("--pyrometer-device", a->pyrometer_device,
+                  "serve: simulate the pyrometer (Modbus RTU, 9600 8N1, slave 1) on this serial "
+                  "device, e.g. one end of a socat pty pair");
     s->add_flag("--intensity", a->vc.peaks.intensity, "serve: peaks mode sends an intensity row");
     s->add_flag("--multipart", a->multipart,
                 "serve: peaks mode sends range and intensity as parts of one multi-part buffer");

@@ -54,11 +54,20 @@ core::Result<void> ModbusAxis::connect() {
 }
 
 core::Result<bool> ModbusAxis::move_to(int position) {
+    const bool reused = ctx_ != nullptr;
     if (auto ok = connect(); !ok) return ok.error();
-    modbus_t* ctx = as_ctx(ctx_);
     std::uint16_t regs[4] = {};
-    if (modbus_read_registers(ctx, kTarget, 4, regs) != 4)
-        return fail(std::string("read: ") + modbus_strerror(errno));
+    if (modbus_read_registers(as_ctx(ctx_), kTarget, 4, regs) != 4) {
+        // A connection kept from the last move may have died with a restarted controller:
+        // one fresh connection before giving up.
+        const std::string why = modbus_strerror(errno);
+        disconnect();
+        if (!reused) return fail("read: " + why);
+        if (auto ok = connect(); !ok) return ok.error();
+        if (modbus_read_registers(as_ctx(ctx_), kTarget, 4, regs) != 4)
+            return fail(std::string("read: ") + modbus_strerror(errno));
+    }
+    modbus_t* ctx = as_ctx(ctx_);
     if (regs[kCurrent] == position && regs[kState] == kInPosition) return false;
     const std::uint16_t cmd[2] = {static_cast<std::uint16_t>(position), kMove};
     if (modbus_write_registers(ctx, kTarget, 2, cmd) != 2)

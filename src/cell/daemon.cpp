@@ -34,6 +34,7 @@ using std::chrono::milliseconds;
 
 constexpr milliseconds kLoopPeriod{100};  // control and worker loops: beat at least this often
 constexpr double kMarginSlackS = 0.02;
+constexpr milliseconds kMaxCameraWait{5'000};
 
 std::int64_t now_ns() {
     return std::chrono::duration_cast<std::chrono::nanoseconds>(
@@ -288,6 +289,7 @@ struct Daemon::Impl {
     void acquisition_loop();
     Captured acquire_part(Job job);
     void prepare_acquisition(const std::shared_ptr<const Setup>& s);
+    void await_accel_history(double margin_s) const;
     void processing_loop();
     void process(Captured c);
     void prepare_results(const std::shared_ptr<const Setup>& s);
@@ -422,6 +424,21 @@ void Daemon::Impl::prepare_acquisition(const std::shared_ptr<const Setup>& s) {
     axis = s->config.axis.kind == "modbus" ? std::make_unique<ModbusAxis>(s->config.axis) : nullptr;
 }
 
+void Daemon::Impl::await_accel_history(double margin_s) const {
+    // The record before a scan must be whole too, and the stream may have just started or come
+    // back after an outage. A stream that is silent is not waited for: the part is measured
+    // without it (degraded).
+    constexpr std::int64_t kInFlightNs = 30'000'000;  // the newest samples may be on their way
+    const auto margin_ns = static_cast<std::int64_t>(margin_s * 1e9);
+    const auto deadline = Clock::now() + std::chrono::duration<double>(margin_s + 0.5);
+    while (Clock::now() < deadline) {
+        const std::int64_t t = now_ns() - kInFlightNs;
+        if (ring->copy_range(t - 100'000'000, t).samples.empty()) return;  // silent
+        if (ring->copy_range(t - margin_ns, t).complete()) return;
+        std::this_thread::sleep_for(milliseconds(20));
+    }
+}
+
 void Daemon::Impl::acquisition_loop() {
     while (!workers_stop) {
         acq_beat = steady_ns();
@@ -448,19 +465,21 @@ Captured Daemon::Impl::acquire_part(Job next) {
         c.failure = why;
         c.rec.faces.clear();
     };
+    // The exposure is set from the temperature at the start; the thermal correction uses the
+    // reading taken after the scans (below), when the pyrometer has surely seen this part and
+    // not the one before.
+    std::optional<double> exposure_temperature;
     if (pyrometer) {
-        const plc::PyrometerReading t = pyrometer->latest();
-        if (t.valid())
-            c.rec.temperature_c = t.temperature_c;
-        else
-            c.degraded.push_back("part temperature unknown: pyrometer " +
-                                 (t.last_error.empty()
-                                      ? std::string(t.stale ? "stale" : "out of range")
-                                      : t.last_error));
+        if (const plc::PyrometerReading t = pyrometer->latest(); t.valid())
+            exposure_temperature = t.temperature_c;
     }
     // The accelerometer is recorded a little beyond the margins the compensation needs, so that
     // the sample grid's phase never leaves a face a fraction of a period short.
     const double margin_s = s.config.accel_margin_s + kMarginSlackS;
+    // A camera lost recently is retried after a backoff: a short one is worth waiting for, as
+    // the part is here now; a long one fails the part at once with the reason.
+    if (const auto wait = session->backoff_remaining(); wait <= kMaxCameraWait)
+        std::this_thread::sleep_for(wait);
     std::int64_t t_free_ns = 0;  // the axis may move from then on
     for (const auto& name : job.faces) {
         if (abandoned == job.sequence || stop) {
@@ -500,7 +519,8 @@ Captured Daemon::Impl::acquire_part(Job next) {
         sc.R_camera_accel = face->R_camera_accel;
         session->set_scan_config(sc);
         acq_beat = steady_ns();
-        auto out = session->scan(s.config.acquisition.scan_s, c.rec.temperature_c);
+        if (accel) await_accel_history(margin_s);
+        auto out = session->scan(s.config.acquisition.scan_s, exposure_temperature);
         acq_beat = steady_ns();
         if (!out) {
             fail(plc::ErrorCode::kDeviceLost, "face " + name + ": " + out.error().message);
@@ -515,6 +535,16 @@ Captured Daemon::Impl::acquire_part(Job next) {
         return c;
     }
     c.last_profile_ns = c.rec.faces.back().profile_times_ns.back();
+    if (pyrometer) {
+        const plc::PyrometerReading t = pyrometer->latest();
+        if (t.valid())
+            c.rec.temperature_c = t.temperature_c;
+        else
+            c.degraded.push_back("part temperature unknown: pyrometer " +
+                                 (t.last_error.empty()
+                                      ? std::string(t.stale ? "stale" : "out of range")
+                                      : t.last_error));
+    }
     if (accel) {
         // The compensation needs the accelerometer record a margin past the last profile.
         const auto t0 = Clock::now();

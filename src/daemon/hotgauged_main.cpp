@@ -61,6 +61,8 @@ int main(int argc, char** argv) {
         return app.exit(e) == 0 ? 0 : 2;
     }
 
+    // A results file over the size limit (RLIMIT_FSIZE) is a write error to report, not a kill.
+    signal(SIGXFSZ, SIG_IGN);
     // Signals go to one thread (sigwait), never into the workers.
     sigset_t signals;
     sigemptyset(&signals);

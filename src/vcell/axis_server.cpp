@@ -17,6 +17,7 @@ namespace hotgauge::vcell {
 namespace {
 
 constexpr int kTarget = 0, kCommand = 1, kCurrent = 2, kState = 3, kFaces = 4, kMoves = 5;
+constexpr int kPartRequest = 6, kPartLoaded = 7;
 constexpr int kRegisters = 8;
 constexpr std::uint16_t kInPosition = 0, kMoving = 1, kFault = 2;
 
@@ -25,6 +26,7 @@ constexpr std::uint16_t kInPosition = 0, kMoving = 1, kFault = 2;
 struct AxisServer::Impl {
     AxisServerConfig config;
     std::function<void(int)> on_arrival;
+    std::function<void(int)> on_part_request;
     modbus_t* ctx = nullptr;
     modbus_mapping_t* map = nullptr;
     int listen_fd = -1;
@@ -32,6 +34,7 @@ struct AxisServer::Impl {
     std::thread thread;
     std::atomic<bool> stop{false};
     std::atomic<int> face{1};
+    std::atomic<int> part_loaded{0};  // register 7, copied into the map by the server thread
 
     ~Impl() {
         stop = true;
@@ -61,6 +64,9 @@ void AxisServer::Impl::run() {
         }
         timeval tv{0, 10'000};
         const int n = ::select(top + 1, &fds, nullptr, nullptr, &tv);
+        // The map belongs to this thread: other threads' writes reach it through the atomic,
+        // before this round's replies.
+        map->tab_registers[kPartLoaded] = static_cast<std::uint16_t>(part_loaded.load());
         if (n > 0 && FD_ISSET(listen_fd, &fds)) {
             const int c = ::accept(listen_fd, nullptr, nullptr);
             if (c >= 0) clients.push_back(c);
@@ -99,6 +105,13 @@ void AxisServer::Impl::run() {
                                                std::chrono::duration<double>(config.move_time_s));
             }
         }
+        if (r[kPartRequest] != 0) {  // take the request; the owner loads the part
+            const int part = r[kPartRequest];
+            r[kPartRequest] = 0;
+            part_loaded = 0;
+            r[kPartLoaded] = 0;
+            if (on_part_request) on_part_request(part);
+        }
         if (moving_to != 0 && Clock::now() >= arrive_at) {
             if (on_arrival) on_arrival(moving_to);
             face = moving_to;
@@ -115,14 +128,17 @@ AxisServer::AxisServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 AxisServer::~AxisServer() = default;
 int AxisServer::port() const { return impl_->port; }
 int AxisServer::current_face() const { return impl_->face; }
+void AxisServer::set_part_loaded(int part) { impl_->part_loaded = part; }
 
-core::Result<std::unique_ptr<AxisServer>> AxisServer::start(const AxisServerConfig& config,
-                                                            std::function<void(int)> on_arrival) {
+core::Result<std::unique_ptr<AxisServer>> AxisServer::start(
+    const AxisServerConfig& config, std::function<void(int)> on_arrival,
+    std::function<void(int)> on_part_request) {
     if (config.n_faces < 1 || config.initial_face < 1 || config.initial_face > config.n_faces)
         return core::make_error("axis: initial face must be in 1..n_faces");
     auto impl = std::make_unique<Impl>();
     impl->config = config;
     impl->on_arrival = std::move(on_arrival);
+    impl->on_part_request = std::move(on_part_request);
     const std::string where = "axis server " + config.bind + ":" + std::to_string(config.port);
     impl->ctx = modbus_new_tcp(config.bind.c_str(), config.port);
     impl->map = modbus_mapping_new(0, 0, kRegisters, 0);

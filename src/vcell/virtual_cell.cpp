@@ -2,10 +2,13 @@
 
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <cstdio>
 #include <cstring>
 #include <mutex>
 #include <optional>
 #include <thread>
+#include <utility>
 
 #include "hotgauge/accel/udp.hpp"
 #include "hotgauge/sim/scene.hpp"
@@ -23,14 +26,47 @@ std::int64_t now_ns() {
 
 constexpr double kServeHorizonS = 7 * 24 * 3600.0;  // press blows are drawn for a week
 
+// One part on the support; immutable once built, shared with the renderer's snapshot.
+struct LoadedPart {
+    int number = 0;
+    sim::SimOptions options;
+    sim::Scene scene;
+};
+
+// Builds part n with `rng` seeded from its seed (start goes on drawing from it).
+core::Result<std::shared_ptr<const LoadedPart>> build_part(const VirtualCellConfig& c, int n,
+                                                           std::mt19937_64& rng) {
+    sim::SimOptions options = part_options(c.part, n);
+    rng.seed(options.seed);
+    auto scene = sim::Scene::create(c.recipe, c.cell, options, rng);
+    if (!scene) return scene.error();
+    return std::shared_ptr<const LoadedPart>(
+        new LoadedPart{n, std::move(options), std::move(*scene)});
+}
+
+core::Result<void> write_part_truth(const VirtualCellConfig& c, const LoadedPart& part) {
+    if (c.truth_dir.empty()) return {};
+    char name[32];
+    std::snprintf(name, sizeof name, "part-%04d", part.number);
+    return sim::write_truth(part.scene.truth(), c.truth_dir / name);
+}
+
 }  // namespace
+
+sim::SimOptions part_options(const sim::SimOptions& base, int n) {
+    sim::SimOptions o = base;
+    const long long k = n - 1LL;
+    o.seed = base.seed + static_cast<std::uint64_t>(k);
+    o.temperature_c = base.temperature_c + static_cast<double>((k * 37 + 100) % 201 - 100);
+    return o;
+}
 
 struct VirtualCell::Impl {
     VirtualCellConfig config;
     // The face the sensor is at: set at start, then by the axis (another thread).
     std::atomic<const sim::FaceConfig*> face{nullptr};
     std::unique_ptr<AxisServer> axis;
-    std::optional<sim::Scene> scene;
+    std::unique_ptr<plc::PyrometerSimulator> pyrometer;
     std::optional<sim::Vibration> vibration;
     std::optional<acquire::Triangulation> triangulation;
     std::int64_t t0_ns = 0;  // the vibration's time origin
@@ -44,6 +80,17 @@ struct VirtualCell::Impl {
     std::int64_t t_scan_start_ns = 0;
     bool warned_format = false;
 
+    // The part on the support: the renderer takes a snapshot per frame, the loader swaps it.
+    mutable std::mutex part_mutex;
+    // part, requested and stop_loader are guarded by part_mutex; `axis` and `pyrometer` are set
+    // before the loader starts, and reset after it stops.
+    std::shared_ptr<const LoadedPart> part;
+    int requested = 0;  // a part request the loader has not taken yet
+    bool stop_loader = false;
+    std::condition_variable loader_wake;
+    std::atomic<int> loaded{0};  // register 7's value, changed under part_mutex
+    std::thread loader_thread;
+
     // Accelerometer thread.
     std::optional<accel::UdpAccelSender> sender;
     std::thread accel_thread;
@@ -54,9 +101,15 @@ struct VirtualCell::Impl {
 
     ~Impl() {
         stop = true;
+        {
+            std::lock_guard lock(part_mutex);
+            stop_loader = true;
+        }
+        loader_wake.notify_one();
+        if (loader_thread.joinable()) loader_thread.join();  // it reports to the axis
         axis.reset();
         if (accel_thread.joinable()) accel_thread.join();
-        device.reset();  // stops the renderer's thread before the scene goes
+        device.reset();  // stops the renderer's thread before what it renders from goes
     }
 
     Eigen::Vector3d sensor_origin(std::int64_t t_ns) const {
@@ -68,11 +121,63 @@ struct VirtualCell::Impl {
         return f->T_world_camera.translation() + travel_mm * f->scan_direction.normalized() + u;
     }
 
+    std::shared_ptr<const LoadedPart> current_part() const {
+        std::lock_guard lock(part_mutex);
+        return part;
+    }
+
+    // Register 7, the pyrometer and the renderer all change to `p` at once, under the lock, so
+    // that a newer request (which sets register 7 to 0 under it too) is never overtaken.
+    void publish(std::shared_ptr<const LoadedPart> p) {
+        if (pyrometer) pyrometer->set_temperature(p->options.temperature_c);
+        loaded = p->number;
+        if (axis) axis->set_part_loaded(p->number);
+        part = std::move(p);
+    }
+
+    void request_part(int n);  // the axis thread: returns at once
+    void run_loader();
     void render(const FrameRequest& req, std::span<std::uint8_t> data);
     void run_accel();
 };
 
+void VirtualCell::Impl::request_part(int n) {
+    {
+        std::lock_guard lock(part_mutex);
+        requested = n;  // a newer request supersedes one not yet loaded
+        loaded = 0;
+        if (axis) axis->set_part_loaded(0);
+    }
+    loader_wake.notify_one();
+    detail::log().info("part {} requested", n);
+}
+
+// Builds parts off the render, stream and axis threads: Scene::create takes a while.
+void VirtualCell::Impl::run_loader() {
+    std::unique_lock lock(part_mutex);
+    while (true) {
+        loader_wake.wait(lock, [this] { return stop_loader || requested != 0; });
+        if (stop_loader) return;
+        const int n = std::exchange(requested, 0);
+        lock.unlock();
+        std::mt19937_64 rng;
+        auto built = build_part(config, n, rng);
+        core::Result<void> written = built ? write_part_truth(config, **built) : built.error();
+        lock.lock();
+        if (!written) {  // register 7 stays 0: the PLC's load times out, as with a jammed feeder
+            detail::log().error("part {} not loaded: {}", n, written.error().message);
+            continue;
+        }
+        if (requested != 0 || stop_loader) continue;  // superseded meanwhile
+        const sim::SimOptions& o = (*built)->options;
+        detail::log().info("part {} loaded: seed {}, {} °C", n, o.seed, o.temperature_c);
+        publish(std::move(*built));
+    }
+}
+
 void VirtualCell::Impl::render(const FrameRequest& req, std::span<std::uint8_t> data) {
+    const std::shared_ptr<const LoadedPart> p = current_part();  // one part for the whole frame
+    const sim::Scene& scene = p->scene;
     if (req.acquisition != acquisition) {
         acquisition = req.acquisition;
         t_scan_start_ns = req.timestamp_ns;
@@ -83,12 +188,12 @@ void VirtualCell::Impl::render(const FrameRequest& req, std::span<std::uint8_t> 
         sim::ProfileEffects effects;  // the image's own noise replaces the range noise;
         effects.range_noise = false;  // reflections are drawn as second stripes
         effects.spikes = false;
-        scene->cast_profile(*face.load(), sensor_origin(req.timestamp_ns), render_rng, returns,
-                            effects);
+        scene.cast_profile(*face.load(), sensor_origin(req.timestamp_ns), render_rng, returns,
+                           effects);
         StripeLook look = config.look;
         look.full_scale = req.bytes_per_pixel == 1 ? 255 : config.look.full_scale;
         render_stripe(returns, *triangulation, look, req.exposure_us,
-                      look.glow * glow_scale(config.part.temperature_c), req.width, req.height,
+                      look.glow * glow_scale(p->options.temperature_c), req.width, req.height,
                       req.offset_x, req.offset_y, req.bytes_per_pixel, render_rng, data);
         return;
     }
@@ -110,7 +215,7 @@ void VirtualCell::Impl::render(const FrameRequest& req, std::span<std::uint8_t> 
     profile_rows.resize(w * static_cast<std::size_t>(rpp));
     for (int k = 0; k < profiles; ++k) {
         const std::int64_t t = req.timestamp_ns + k * period_ns;
-        scene->cast_profile(*face.load(), sensor_origin(t), render_rng, returns);
+        scene.cast_profile(*face.load(), sensor_origin(t), render_rng, returns);
         render_peaks(returns, *triangulation, config.peaks, req.width, req.offset_x,
                      config.peak_row_offset, profile_rows.data());
         // One frame: the profile's rows together; multi-part: row kind j of every profile in
@@ -168,7 +273,11 @@ void VirtualCell::Impl::run_accel() {
 VirtualCell::VirtualCell(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 VirtualCell::~VirtualCell() = default;
 
-const sim::SimTruth& VirtualCell::truth() const { return impl_->scene->truth(); }
+sim::SimTruth VirtualCell::truth() const { return impl_->current_part()->scene.truth(); }
+double VirtualCell::part_temperature_c() const {
+    return impl_->current_part()->options.temperature_c;
+}
+int VirtualCell::part_loaded() const { return impl_->loaded; }
 
 int VirtualCell::axis_port() const { return impl_->axis ? impl_->axis->port() : -1; }
 
@@ -204,10 +313,12 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
     if (!(c.cell.accel.rate_hz > 0))
         return core::make_error("virtual cell: accelerometer rate must be > 0");
 
-    std::mt19937_64 rng(c.part.seed);
-    auto scene = sim::Scene::create(c.recipe, c.cell, c.part, rng);
-    if (!scene) return scene.error();
-    impl->scene.emplace(std::move(*scene));
+    std::mt19937_64 rng;
+    auto first = build_part(c, 1, rng);
+    if (!first) return first.error();
+    if (auto ok = write_part_truth(c, **first); !ok) return ok.error();
+    impl->part = std::move(*first);  // before the renderer runs
+    impl->loaded = 1;
     std::mt19937_64 scan_rng(c.part.scan_seed ? *c.part.scan_seed : rng());
     impl->vibration.emplace(c.cell.vibration, 0.0, kServeHorizonS, scan_rng);
     impl->render_rng = sim::RandomStream(scan_rng());
@@ -220,6 +331,12 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
         auto sender = accel::UdpAccelSender::open(c.accel_to, c.accel_sensor_id);
         if (!sender) return sender.error();
         impl->sender.emplace(std::move(*sender));
+    }
+    if (c.pyrometer) {
+        auto pyro = plc::PyrometerSimulator::start(*c.pyrometer, 0, 0.1);
+        if (!pyro) return core::make_error("virtual cell: pyrometer: " + pyro.error().message);
+        impl->pyrometer = std::move(*pyro);
+        impl->pyrometer->set_temperature(impl->part->options.temperature_c);
     }
     Impl* raw = impl.get();
     auto device = GvDevice::start(
@@ -234,18 +351,26 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
         ac.n_faces = static_cast<int>(c.cell.faces.size());
         ac.initial_face = initial;
         ac.move_time_s = c.axis_move_s;
-        auto axis = AxisServer::start(ac, [raw](int f) {
-            const auto& faces = raw->config.cell.faces;
-            raw->face = &faces[static_cast<std::size_t>(f - 1)];
-            detail::log().info("axis: at face {} ({})", f,
-                               faces[static_cast<std::size_t>(f - 1)].name);
-        });
+        auto axis = AxisServer::start(
+            ac,
+            [raw](int f) {
+                const auto& faces = raw->config.cell.faces;
+                raw->face = &faces[static_cast<std::size_t>(f - 1)];
+                detail::log().info("axis: at face {} ({})", f,
+                                   faces[static_cast<std::size_t>(f - 1)].name);
+            },
+            [raw](int n) { raw->request_part(n); });
         if (!axis) return axis.error();
+        std::lock_guard lock(impl->part_mutex);  // its thread may already be asking for a part
         impl->axis = std::move(*axis);
+        impl->axis->set_part_loaded(impl->loaded);
     }
+    impl->loader_thread = std::thread([raw] { raw->run_loader(); });
     if (impl->sender) impl->accel_thread = std::thread([raw] { raw->run_accel(); });
-    detail::log().info("virtual cell: face {}, {} mode, {} mm/s, accelerometer {}", c.face, c.mode,
-                       c.speed_mm_s, c.accel_to.empty() ? "off" : "-> " + c.accel_to);
+    detail::log().info("virtual cell: face {}, {} mode, {} mm/s, accelerometer {}, pyrometer {}",
+                       c.face, c.mode, c.speed_mm_s,
+                       c.accel_to.empty() ? "off" : "-> " + c.accel_to,
+                       c.pyrometer ? "on " + c.pyrometer->device : "off");
     return std::unique_ptr<VirtualCell>(new VirtualCell(std::move(impl)));
 }
 

@@ -25,6 +25,9 @@ struct MeasureConfig {
     double refine_window_mm = 0.5;    // ... and again around the first fine circle
     double max_pair_gap_mm = 2.0;     // neighbour samples farther apart do not bracket an edge
     int min_plane_points = 50;
+    // Faces are prepared and features measured on this many threads (0: one per core). Each
+    // feature's computation is the same on any thread, so results do not depend on it.
+    int threads = 0;
     int min_edge_points = 20;
     double free_centre_min_arc_deg = 300.0;         // below: the circle is centred on the part axis
     double max_partial_arc_disagreement_mm = 0.05;  // ... unless a free fit disagrees more

@@ -8,14 +8,22 @@
 // sensor travels speed_mm_s along the face's scan direction, so profile k of an acquisition is
 // at speed · (t_k − t_0), as acquire::ScanBuilder assumes. Peaks frames bundle
 // profiles_per_frame = Height / rows_per_profile profiles, line_period_s apart.
+//
+// The conveyor (docs/virtual-cell.md "Parts"): a PLC loads part N (1, 2, ...) onto the support by
+// writing the axis controller's register 6; part_options() says which part that is. The part is
+// built on a loader thread and then swapped in whole: the camera renders the old part until the
+// new one is complete, never a mix. Part 1 is `part` itself and is loaded at start.
 #include <atomic>
 #include <cstdint>
+#include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "hotgauge/acquire/stripe.hpp"
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/result.hpp"
+#include "hotgauge/plc/pyrometer.hpp"
 #include "hotgauge/sim/simulator.hpp"
 #include "hotgauge/vcell/axis_server.hpp"
 #include "hotgauge/vcell/gv_device.hpp"
@@ -26,7 +34,7 @@ namespace hotgauge::vcell {
 struct VirtualCellConfig {
     core::Recipe recipe;
     sim::CellConfig cell;
-    sim::SimOptions part;  // seed, temperature, pose: the part on the support
+    sim::SimOptions part;  // seed, temperature, pose: part 1, and the base of parts 2, 3, ...
     std::string face = "top";
     std::string mode = "image";  // image | peaks
     double speed_mm_s = 100.0;
@@ -44,7 +52,19 @@ struct VirtualCellConfig {
     int axis_port = -1;
     std::string axis_bind = "127.0.0.1";
     double axis_move_s = 0.3;
+    // Non-empty: each part's ground truth goes to truth_dir/part-NNNN (sim::write_truth) before
+    // the part is reported loaded, so a reader who sees register 7 == N finds it complete.
+    std::filesystem::path truth_dir;
+    // Set: a pyrometer stand-in on this serial device (register 0, 0.1 °C per count) reads the
+    // temperature of the part on the support.
+    std::optional<plc::SerialConfig> pyrometer;
 };
+
+// Part n (≥ 1) of the conveyor: `base` with seed + (n − 1) and temperature + d(n), where
+// d(n) = ((n − 1)·37 + 100) mod 201 − 100 °C. So d(1) = 0 (part 1 is `base`), and any 201
+// consecutive parts take each offset in −100..100 °C once (37 and 201 are coprime):
+// 0, +37, +74, −90, −53, −16, +21, +58, +95, −69, −32, +5 for parts 1..12.
+sim::SimOptions part_options(const sim::SimOptions& base, int n);
 
 struct VirtualCellStats {
     GvDeviceStats camera;
@@ -52,16 +72,21 @@ struct VirtualCellStats {
     std::uint64_t acquisitions = 0;
 };
 
+// Thread safety: every accessor from any thread.
 class VirtualCell {
   public:
-    // Builds the part and the device, then serves until destroyed. Errors name the setting.
+    // Builds part 1 and the device, then serves until destroyed. Errors name the setting.
     static core::Result<std::unique_ptr<VirtualCell>> start(VirtualCellConfig config);
     ~VirtualCell();
     VirtualCell(const VirtualCell&) = delete;
     VirtualCell& operator=(const VirtualCell&) = delete;
 
-    const sim::SimTruth& truth() const;
-    int axis_port() const;  // −1 without an axis
+    // The part on the support, the one the camera renders: while part N loads it is still the
+    // previous one, while part_loaded() reads 0 as register 7 does.
+    sim::SimTruth truth() const;  // a copy: the part may be swapped meanwhile
+    double part_temperature_c() const;
+    int part_loaded() const;  // register 7: 1 at start; 0 while a part loads (or failed to)
+    int axis_port() const;    // −1 without an axis
     VirtualCellStats stats() const;
 
   private:

@@ -1,0 +1,231 @@
+#!/usr/bin/python3
+"""hotgauged under faults, on the virtual line (tests/virtual_line.py), loopback only.
+
+One daemon lives through, in turn:
+  1. a good part;
+  2. the PLC dropping its connection mid-handshake (BUSY): the result waits for it, valid;
+  3. the accelerometer stream stopped: the part is measured and flagged degraded;
+  4. a broken config sent with SIGHUP: rejected, the old one kept, the next part measured;
+  5. the results directory full (RLIMIT_FSIZE on the daemon): PLC fault 206, nothing half written;
+  6. the camera (the whole virtual cell) killed mid-part: PLC fault 203; after it is back, the
+     next part is measured;
+and after each, the daemon still runs and no earlier result is lost from the files.
+
+    /usr/bin/python3 daemon_faults_test.py BUILD_DIR
+"""
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import virtual_line as vl  # noqa: E402
+
+BIN_DIR = sys.argv[1]
+ADDRESS = "127.0.0.8"  # this test's own camera address
+
+
+class UdpRelay:
+    """Passes the accelerometer's datagrams on to the daemon while `on`."""
+
+    def __init__(self, to_port):
+        self.rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.rx.bind(("127.0.0.1", 0))
+        self.rx.settimeout(0.1)
+        self.port = self.rx.getsockname()[1]
+        self.tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.to = ("127.0.0.1", to_port)
+        self.on = True
+        self.stop = False
+        self.thread = threading.Thread(target=self.run, daemon=True)
+        self.thread.start()
+
+    def run(self):
+        while not self.stop:
+            try:
+                data = self.rx.recv(65536)
+            except socket.timeout:
+                continue
+            if self.on:
+                self.tx.sendto(data, self.to)
+
+
+def jsonl(line):
+    out = []
+    for name in sorted(os.listdir(line.results_dir)):
+        if name.endswith(".jsonl"):
+            with open(os.path.join(line.results_dir, name)) as f:
+                out += [json.loads(t) for t in f]
+    return out
+
+
+def csv_rows(line):
+    n = 0
+    for name in sorted(os.listdir(line.results_dir)):
+        if name.endswith(".csv"):
+            with open(os.path.join(line.results_dir, name)) as f:
+                n += sum(1 for _ in f) - 1
+    return n
+
+
+def alive(line):
+    assert line.daemon.proc.poll() is None, f"hotgauged died:\n{line.daemon.text()[-3000:]}"
+
+
+def step(title):
+    print(f"--- {title}", flush=True)
+
+
+def main():
+    workdir = tempfile.mkdtemp(prefix="hotgauge-faults-")
+    line = vl.Line(BIN_DIR, workdir, ADDRESS, seed=11)
+    relay = None
+    ok = False
+    try:
+        line.start_pty()
+        relay = UdpRelay(line.accel_port)
+        line.start_cell(accel_to=f"127.0.0.1:{relay.port}")
+        line.write_config()
+        good_config = open(line.config_path).read()
+        line.start_daemon()
+        plc, conveyor = vl.Plc(line.plc_port), vl.Conveyor(line.axis_port)
+        n = 0
+        kept = []  # JSON lines so far: must never shrink or change
+
+        def part(expect_state=vl.DONE):
+            nonlocal n
+            n += 1
+            p = vl.run_part(plc, conveyor, n, 500 + n)
+            state = "DONE" if p["state"] == vl.DONE else f"FAULT {p['error']}"
+            print(f"part {n}: {state}, verdict {p['verdict']}, cycle {p['cycle_s']:.1f} s",
+                  flush=True)
+            assert p["state"] == expect_state, p
+            return p
+
+        def start_part(k):
+            conveyor.load(k)
+            plc.to_idle()
+            plc.trigger(500 + k)
+
+        def files_intact():
+            now = jsonl(line)
+            assert now[:len(kept)] == kept, "an earlier result changed or vanished"
+            kept[:] = now
+            assert csv_rows(line) == len(now), f"{csv_rows(line)} CSV rows, {len(now)} JSON lines"
+
+        step("1. a good part")
+        p = part()
+        assert p["verdict"] == "OK" and p["n_features"] == 13, p
+        files_intact()
+
+        step("2. the PLC drops its connection while BUSY, then comes back")
+        n += 1
+        start_part(n)
+        plc.wait_state({vl.BUSY}, 5)
+        plc.close()
+        time.sleep(3)
+        plc = vl.Plc(line.plc_port)
+        r = vl.decode(plc.wait_state({vl.DONE, vl.FAULT}, 60))
+        assert r["state"] == vl.DONE and r["part_id"] == 500 + n, r
+        assert r["verdict"] == "OK" and all(f["um"] is not None for f in r["features"].values()), r
+        plc.to_idle()
+        alive(line)
+        files_intact()
+        assert kept[-1]["part"]["part_id"] == str(500 + n)
+
+        step("3. the accelerometer stream stops")
+        relay.on = False
+        time.sleep(1.0)
+        p = part()
+        last = jsonl(line)[-1]["part"]
+        print("   degraded:", last["degraded_reasons"][:2])
+        assert last["degraded"], "no accelerometer: the part must be flagged degraded"
+        assert any("accelerometer" in why for why in last["degraded_reasons"]), last
+        assert p["verdict"] in ("DEGRADED", "NOK"), p["verdict"]
+        relay.on = True
+        time.sleep(1.0)
+        alive(line)
+        files_intact()
+
+        step("4. a broken config with SIGHUP")
+        with open(line.config_path, "w") as f:
+            f.write(good_config.replace("camera:", "camera: [unclosed\n  id:", 1))
+        line.daemon.proc.send_signal(signal.SIGHUP)
+        line.daemon.wait_line(r"reload REJECTED", 10)
+        alive(line)
+        p = part()
+        assert p["verdict"] == "OK", p
+        with open(line.config_path, "w") as f:
+            f.write(good_config)
+        line.daemon.proc.send_signal(signal.SIGHUP)
+        line.daemon.wait_line(r"reloaded: config hash", 10)
+        files_intact()
+
+        step("5. the results directory is full")
+        big = max(os.path.getsize(os.path.join(line.results_dir, f))
+                  for f in os.listdir(line.results_dir))
+        pid = str(line.daemon.proc.pid)
+        subprocess.run(["prlimit", "--pid", pid, f"--fsize={big}:unlimited"], check=True)  # soft only
+        p = part(expect_state=vl.FAULT)
+        assert p["error"] == 206, p
+        alive(line)
+        files_intact()  # nothing half written, nothing lost
+        subprocess.run(["prlimit", "--pid", pid, "--fsize=unlimited"], check=True)
+        p = part()
+        assert p["verdict"] == "OK", p
+        files_intact()
+
+        step("6. the camera is killed mid-part")
+        n += 1
+        start_part(n)
+        time.sleep(1.5)  # inside the first face's scan
+        assert plc.state() == vl.BUSY
+        line.cell.proc.kill()
+        line.cell.proc.wait()
+        line.procs.remove(line.cell)
+        conveyor.close()
+        r = vl.decode(plc.wait_state({vl.DONE, vl.FAULT}, 30))
+        print(f"   PLC: state {r['state']} error {r['error']}")
+        assert r["state"] == vl.FAULT and r["error"] == 203, r
+        alive(line)
+        files_intact()
+        assert kept[-1]["part"]["part_id"] == str(500 + n), "the failed part has its row"
+        assert kept[-1]["part"]["verdict"] == "NOT_MEASURED"
+        line.cell.name = "virtual-cell-killed"
+        line.start_cell()
+        conveyor = vl.Conveyor(line.axis_port)
+        p = part()
+        assert p["verdict"] == "OK", p
+        files_intact()
+
+        step("SIGTERM")
+        plc.close()
+        conveyor.close()
+        t0 = time.monotonic()
+        rc = line.daemon.stop(timeout=30)
+        print(f"hotgauged exited {rc} in {time.monotonic() - t0:.1f} s")
+        assert rc == 0
+        seqs = [j["sequence"] for j in kept]
+        print("sequences in the files:", seqs)
+        assert seqs == sorted(set(seqs)), "sequence numbers repeat or run backwards"
+        ok = True
+    finally:
+        if relay:
+            relay.stop = True
+        line.stop()
+        if not ok:
+            vl.print_logs(workdir)
+        else:
+            shutil.rmtree(workdir, ignore_errors=True)
+    print("daemon faults: all passed" if ok else "daemon faults: FAILED")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

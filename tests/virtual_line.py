@@ -1,0 +1,447 @@
+#!/usr/bin/python3
+"""The virtual production line (docs/operations.md "The virtual production line").
+
+Starts the virtual cell (`hotgauge simulate --serve`: a GigE Vision camera, the accelerometer
+stream, the axis controller with its part conveyor, and the pyrometer on a socat pseudo-terminal
+pair), `hotgauged` with a config written for them, and a scripted line PLC (pymodbus) that, for
+each part, has the conveyor bring the next forging, triggers the measurement, reads the result
+from the registers, and acknowledges it. Then it sets the measured values beside the paper's
+Table 2 and the simulated parts' truth, and checks the results files.
+
+    /usr/bin/python3 virtual_line.py --bin-dir BUILD --parts 12 --out out/line     (make demo)
+    /usr/bin/python3 virtual_line.py --bin-dir BUILD --parts 3 --check-mm 0.03     (ctest)
+
+Everything runs on loopback. Exit status 0 when every part was measured (and, with
+--check-mm, every feature within that distance of the truth and the results files complete).
+"""
+import argparse
+import csv
+import json
+import os
+import re
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+import yaml
+from pymodbus.client import ModbusTcpClient
+from pymodbus.constants import Endian
+from pymodbus.payload import BinaryPayloadDecoder
+
+REPO = os.path.abspath(os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+UNIT = 1
+IDLE, BUSY, DONE, FAULT = 1, 2, 3, 4
+TRIGGER, ACK, RESET = 1, 2, 3
+VERDICTS = {0: "none", 1: "OK", 2: "NOK", 3: "NOT_MEASURED", 4: "DEGRADED"}
+INVALID_UM = -0x80000000
+# The axis controller's conveyor registers (docs/virtual-cell.md).
+CONVEYOR_REQUEST, CONVEYOR_LOADED = 6, 7
+
+# Bian et al. 2024, Table 2: measured value and error, mm (nominal = hub-a's recipe).
+PAPER_TABLE2 = {
+    "Diameter 7": (24.27, -0.03), "Diameter 3": (69.55, 0.05), "Diameter 5": (54.62, 0.02),
+    "Diameter 1": (138.43, 0.03), "Diameter 4": (62.47, -0.03), "Diameter 2": (43.96, 0.06),
+    "Diameter 6": (27.74, 0.04), "Height 1": (39.36, 0.06), "Height 2": (48.25, -0.05),
+    "Height 3 side1": (13.72, 0.02), "Height 4 side1": (76.26, 0.06),
+    "Height 3 side2": (13.66, -0.04), "Height 4 side2": (76.25, 0.05),
+}
+
+
+def free_port(kind=socket.SOCK_STREAM):
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for(predicate, what, timeout):
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.05)
+
+
+class Process:
+    """A child process with its output in a log file; stopped with SIGTERM."""
+
+    def __init__(self, name, argv, workdir):
+        self.name = name
+        self.log_path = os.path.join(workdir, name + ".log")
+        self.log = open(self.log_path, "w")
+        self.proc = subprocess.Popen(argv, stdout=self.log, stderr=subprocess.STDOUT)
+
+    def text(self):
+        with open(self.log_path, errors="replace") as f:
+            return f.read()
+
+    def wait_line(self, pattern, timeout):
+        rx = re.compile(pattern, re.M)
+
+        def found():
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"{self.name} exited ({self.proc.returncode}):\n{self.text()}")
+            return rx.search(self.text())
+        return wait_for(found, f"{self.name}: /{pattern}/", timeout)
+
+    def stop(self, timeout=30):
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+                raise RuntimeError(f"{self.name} did not stop within {timeout} s of SIGTERM")
+        self.log.close()
+        return self.proc.returncode
+
+
+class Plc:
+    """The line PLC: docs/plc-modbus.md, big-endian word order."""
+
+    def __init__(self, port, host="127.0.0.1"):
+        self.host, self.port = host, port
+        self.client = ModbusTcpClient(host, port=port, timeout=3)
+        if not self.client.connect():
+            raise RuntimeError(f"PLC: cannot connect to hotgauged at {host}:{port}")
+
+    def close(self):
+        self.client.close()
+
+    def inputs(self):
+        rr = self.client.read_input_registers(0, 112, slave=UNIT)
+        if rr.isError():
+            raise RuntimeError(f"PLC: read input registers: {rr}")
+        return rr.registers
+
+    def write(self, address, values):
+        rr = self.client.write_registers(address, values, slave=UNIT)
+        if rr.isError():
+            raise RuntimeError(f"PLC: write {address}: {rr}")
+
+    def state(self):
+        return self.inputs()[1]
+
+    def trigger(self, part_id, slot=1, face=0):
+        self.write(0, [TRIGGER, part_id >> 16, part_id & 0xFFFF, slot, face, part_id & 0xFFFF])
+
+    def wait_state(self, states, timeout):
+        return wait_for(lambda: (lambda r: r if r[1] in states else None)(self.inputs()),
+                        f"PLC state in {states}", timeout)
+
+    def to_idle(self):
+        """Acknowledges a result or resets a fault, so that a trigger is accepted."""
+        st = self.state()
+        if st == DONE:
+            self.write(0, [ACK])
+        elif st == FAULT:
+            self.write(0, [RESET])
+        if st != IDLE:
+            self.wait_state({IDLE}, 10)
+
+
+def decode(r):
+    """The status block and every feature slot of one read of the input registers."""
+    def dec(a):
+        return BinaryPayloadDecoder.fromRegisters(r[a:a + 2], byteorder=Endian.Big,
+                                                  wordorder=Endian.Big)
+    out = {"state": r[1], "error": r[2], "sequence": r[5],
+           "part_id": dec(6).decode_32bit_uint(), "verdict": VERDICTS.get(r[11], str(r[11])),
+           "n_features": r[12],
+           "temperature_c": None if r[13] == 0x8000 else (r[13] - (r[13] >> 15 << 16)) / 10,
+           "features": {}}
+    for slot in range(1, r[12] + 1):
+        a = 16 + 6 * (slot - 1)
+        um = dec(a).decode_32bit_int()
+        out["features"][slot] = {"um": None if um == INVALID_UM else um,
+                                 "mm": dec(a + 2).decode_32bit_float(),
+                                 "verdict": VERDICTS.get(r[a + 4], str(r[a + 4]))}
+    return out
+
+
+class Conveyor:
+    """The virtual cell's part conveyor, on its axis controller (docs/virtual-cell.md)."""
+
+    def __init__(self, port):
+        self.client = ModbusTcpClient("127.0.0.1", port=port, timeout=3)
+        if not self.client.connect():
+            raise RuntimeError(f"conveyor: cannot connect to 127.0.0.1:{port}")
+
+    def load(self, n, timeout=60):
+        rr = self.client.write_register(CONVEYOR_REQUEST, n, slave=1)
+        if rr.isError():
+            raise RuntimeError(f"conveyor: {rr}")
+
+        def loaded():
+            rr = self.client.read_holding_registers(CONVEYOR_LOADED, 1, slave=1)
+            return not rr.isError() and rr.registers[0] == n
+        wait_for(loaded, f"part {n} on the conveyor", timeout)
+
+    def close(self):
+        self.client.close()
+
+
+class Line:
+    """The virtual cell, hotgauged and the pieces between them, in one working folder."""
+
+    def __init__(self, bin_dir, workdir, address, seed=1, temperature=1050.0, config_extra=""):
+        self.bin_dir, self.workdir, self.address = bin_dir, workdir, address
+        self.seed, self.temperature = seed, temperature
+        self.procs = []
+        self.truth_dir = os.path.join(workdir, "truth")
+        self.results_dir = os.path.join(workdir, "results")
+        self.archive_dir = os.path.join(workdir, "archive")
+        self.config_path = os.path.join(workdir, "hotgauged.yaml")
+        self.accel_port = free_port(socket.SOCK_DGRAM)
+        self.plc_port = free_port()
+        self.axis_port = free_port()  # fixed: a restarted cell comes back on the same one
+        self.config_extra = config_extra
+
+    def start(self):
+        self.start_pty()
+        self.start_cell()
+        self.write_config()
+        self.start_daemon()
+        return self
+
+    def start_pty(self):
+        a, b = (os.path.join(self.workdir, n) for n in ("pyrometer", "pyrometer-sim"))
+        self.pyrometer_dev, self.pyrometer_sim_dev = a, b
+        self.socat = Process("socat", ["socat", "-d", "-d", f"pty,raw,echo=0,link={a}",
+                                       f"pty,raw,echo=0,link={b}"], self.workdir)
+        self.procs.append(self.socat)
+        wait_for(lambda: os.path.exists(a) and os.path.exists(b), "the socat pty pair", 10)
+
+    def cell_argv(self, accel_to):
+        return [os.path.join(self.bin_dir, "src/app/hotgauge"), "simulate", "--serve",
+                "--address", self.address, "--mode", "peaks", "--seed", str(self.seed),
+                "--temperature", str(self.temperature), "--speed-mm-s", "200",
+                "--line-rate", "1000", "--accel-to", accel_to, "--axis-port", str(self.axis_port),
+                "--truth-dir", self.truth_dir, "--pyrometer-device", self.pyrometer_sim_dev]
+
+    def start_cell(self, accel_to=None):
+        self.accel_to = accel_to or getattr(self, "accel_to", f"127.0.0.1:{self.accel_port}")
+        self.cell = Process("virtual-cell", self.cell_argv(self.accel_to), self.workdir)
+        self.procs.append(self.cell)
+        self.cell.wait_line(r"^serving virtual camera .* axis 127\.0\.0\.1:%d" % self.axis_port, 60)
+
+    def write_config(self, text=None):
+        cfg = text or f"""# written by tests/virtual_line.py for the virtual cell
+cell: {REPO}/config/cell.yaml
+faces: [top, bottom, side1, side2]
+recipes:
+  1: {REPO}/config/parts/hub-a.yaml
+camera:
+  id: {self.address}
+  mode: peaks
+  width: 2048
+  height: 10
+  pixel_format: Mono16
+  frame_rate_hz: 100
+  packet_resend: true
+  buffers: 32
+  timeout_ms: 500
+  max_timeouts: 3
+  scan_s: 1.3
+  speed_mm_s: 200
+  line_rate_hz: 1000
+  peaks: {{profiles_per_frame: 10, fractional_bits: 6, row_offset: 0}}
+  exposure_table: [[20, 400], [700, 200], [1000, 100], [1200, 50]]
+accelerometer:
+  source: udp
+  bind: 127.0.0.1:{self.accel_port}
+  margin_s: 0.5
+axis:
+  kind: modbus
+  address: 127.0.0.1:{self.axis_port}
+  faces: {{top: 1, bottom: 2, side1: 3, side2: 4}}
+  timeout_ms: 5000
+plc:
+  bind_address: 127.0.0.1
+  port: {self.plc_port}
+pyrometer:
+  device: {self.pyrometer_dev}
+  baud: 9600
+results:
+  dir: {self.results_dir}
+  archive_dir: {self.archive_dir}
+  archive_quota_gb: 1
+  archive_every_nth_ok: 0
+{self.config_extra}"""
+        with open(self.config_path, "w") as f:
+            f.write(cfg)
+
+    def start_daemon(self):
+        self.daemon = Process("hotgauged", [os.path.join(self.bin_dir, "src/daemon/hotgauged"),
+                                            "--config", self.config_path], self.workdir)
+        self.procs.append(self.daemon)
+        self.daemon.wait_line(r"hotgauged .* up: PLC on port", 60)
+
+    def stop(self):
+        rcs = {}
+        for p in reversed(self.procs):
+            rcs[p.name] = p.stop()
+        self.procs = []
+        return rcs
+
+    def truth(self, n):
+        path = os.path.join(self.truth_dir, f"part-{n:04d}", "truth.yaml")
+        t = yaml.safe_load(open(path))
+        return {f["name"]: f["cold_mm"] for f in t["features"]}
+
+
+def run_part(plc, conveyor, n, part_id, timeout=90):
+    """One part through the line; returns what the PLC read and how long the cycle took."""
+    if conveyor:
+        conveyor.load(n)
+    plc.to_idle()
+    t0 = time.monotonic()
+    plc.trigger(part_id)
+    r = plc.wait_state({DONE, FAULT}, timeout)
+    out = decode(r)
+    out["cycle_s"] = time.monotonic() - t0
+    out["part"] = n
+    plc.to_idle()
+    return out
+
+
+def recipe_features():
+    recipe = yaml.safe_load(open(os.path.join(REPO, "config/parts/hub-a.yaml")))
+    return [(f["name"], f["slot"], f["nominal_mm"]) for f in recipe["features"]]
+
+
+def table(parts, line):
+    """Paper's Table 2 beside ours: per feature, our error against each part's truth."""
+    rows = []
+    head = (f"{'feature':<15} {'nominal':>8} | {'paper':>8} {'error':>6} | {'ours (mean)':>11} "
+            f"{'error vs truth: mean':>20} {'max |e|':>8} {'sigma':>6}   (mm, {len(parts)} parts)")
+    rows.append(head)
+    rows.append("-" * len(head))
+    worst = 0.0
+    for name, slot, nominal in recipe_features():
+        vals, errs = [], []
+        for p in parts:
+            f = p["features"].get(slot)
+            if p["state"] != DONE or not f or f["um"] is None:
+                continue
+            vals.append(f["mm"])
+            errs.append(f["mm"] - line.truth(p["part"])[name])
+        paper, perr = PAPER_TABLE2.get(name, (float("nan"), float("nan")))
+        if not errs:
+            rows.append(f"{name:<15} {nominal:8.2f} | {paper:8.2f} {perr:+6.2f} | not measured")
+            worst = float("inf")
+            continue
+        mean = sum(vals) / len(vals)
+        emean = sum(errs) / len(errs)
+        emax = max(abs(e) for e in errs)
+        sd = (sum((e - emean) ** 2 for e in errs) / max(1, len(errs) - 1)) ** 0.5
+        worst = max(worst, emax)
+        rows.append(f"{name:<15} {nominal:8.2f} | {paper:8.2f} {perr:+6.2f} | {mean:11.3f} "
+                    f"{emean:+20.4f} {emax:8.4f} {sd:6.4f}")
+    return "\n".join(rows), worst
+
+
+def check_results_files(results_dir, parts):
+    """Every part has its CSV row and JSON line, and the sequence numbers run on without gaps."""
+    csvs = sorted(f for f in os.listdir(results_dir) if f.endswith(".csv"))
+    jsonls = sorted(f for f in os.listdir(results_dir) if f.endswith(".jsonl"))
+    rows = []
+    for name in csvs:
+        with open(os.path.join(results_dir, name), newline="") as f:
+            reader = csv.reader(f)
+            header = next(reader)
+            for row in reader:
+                assert len(row) == len(header), f"{name}: a row has {len(row)} of {len(header)} cells"
+                rows.append(dict(zip(header, row)))
+    lines = []
+    for name in jsonls:
+        with open(os.path.join(results_dir, name)) as f:
+            for text in f:
+                assert text.endswith("\n"), f"{name}: a line without its end"
+                lines.append(json.loads(text))
+    seqs = [j["sequence"] for j in lines]
+    assert len(rows) == len(lines) == len(parts), \
+        f"{len(parts)} parts, {len(rows)} CSV rows, {len(lines)} JSON lines"
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), f"sequence not continuous: {seqs}"
+    assert [r["sequence"] for r in rows] == [str(s) for s in seqs], "CSV and JSON sequences differ"
+    assert [j["part"]["part_id"] for j in lines] == [str(p["part_id"]) for p in parts], \
+        "part ids in the files differ from the PLC's"
+    for j in lines:
+        for key in ("config_hash", "software_version", "time"):
+            assert j.get(key), f"sequence {j['sequence']}: no {key}"
+        assert j["part"]["stage_ms"], "no stage timings"
+    return csvs, jsonls, seqs
+
+
+def print_logs(workdir, lines=40):
+    """The end of the daemon's and the cell's logs, after a failure."""
+    for name in ("hotgauged", "virtual-cell"):
+        path = os.path.join(workdir, name + ".log")
+        if os.path.exists(path):
+            print(f"--- {name}.log (tail) ---\n" + "".join(open(path).readlines()[-lines:]))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--bin-dir", default=os.path.join(REPO, "build"))
+    ap.add_argument("--parts", type=int, default=12)
+    ap.add_argument("--first-part-id", type=int, default=240001)
+    ap.add_argument("--address", default="127.0.0.2", help="the virtual camera's address")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--out", help="working folder (kept); default: a temporary one")
+    ap.add_argument("--check-mm", type=float,
+                    help="fail unless every feature of every part is within this of the truth")
+    a = ap.parse_args()
+    if a.out:
+        shutil.rmtree(a.out, ignore_errors=True)
+        os.makedirs(a.out)
+        workdir = os.path.abspath(a.out)
+    else:
+        workdir = tempfile.mkdtemp(prefix="hotgauge-line-")
+    line = Line(a.bin_dir, workdir, a.address, seed=a.seed)
+    parts = []
+    ok = False
+    try:
+        line.start()
+        print(f"virtual line: camera {a.address}, PLC 127.0.0.1:{line.plc_port}, "
+              f"work folder {workdir}", flush=True)
+        plc, conveyor = Plc(line.plc_port), Conveyor(line.axis_port)
+        for n in range(1, a.parts + 1):
+            p = run_part(plc, conveyor, n, a.first_part_id + n - 1)
+            parts.append(p)
+            print(f"part {n:2d} id {p['part_id']}: {VERDICTS.get(p['verdict'], p['verdict']) if p['state'] == DONE else 'FAULT %d' % p['error']}"
+                  f" at {p['temperature_c']} °C, PLC sequence {p['sequence']}, cycle {p['cycle_s']:.1f} s",
+                  flush=True)
+        plc.close()
+        conveyor.close()
+        rcs = line.stop()
+        text, worst = table(parts, line)
+        print("\n" + text)
+        csvs, jsonls, seqs = check_results_files(line.results_dir, parts)
+        print(f"\nworst |measured - truth| over all features and parts: {worst:.4f} mm")
+        print(f"results: {', '.join(os.path.join(line.results_dir, f) for f in csvs + jsonls)} "
+              f"(sequence {seqs[0]}..{seqs[-1]})")
+        assert rcs.get("hotgauged") == 0, f"hotgauged exited with {rcs.get('hotgauged')}"
+        assert all(p["state"] == DONE for p in parts), "a part was not measured"
+        if a.check_mm is not None:
+            assert worst <= a.check_mm, f"worst error {worst:.4f} mm > {a.check_mm} mm"
+            assert all(p["verdict"] == "OK" for p in parts), [p["verdict"] for p in parts]
+        ok = True
+    finally:
+        line.stop()
+        if not ok:
+            print_logs(workdir)
+        if not a.out and ok:
+            shutil.rmtree(workdir, ignore_errors=True)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
