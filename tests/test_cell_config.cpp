@@ -31,7 +31,10 @@ TEST(DaemonConfig, TheExampleReads) {
     EXPECT_EQ(c->axis.kind, "modbus");
     EXPECT_EQ(c->axis.faces.at("side2"), 4);
     EXPECT_EQ(c->plc.port, 502);
-    EXPECT_FALSE(c->pyrometer);
+    ASSERT_TRUE(c->pyrometer);
+    EXPECT_EQ(c->pyrometer->serial.device, "/tmp/pyro");
+    EXPECT_NEAR(c->acquisition.scan_s, 1.3, 1e-12);
+    EXPECT_NEAR(c->accel_margin_s, 0.5, 1e-12);
     EXPECT_EQ(c->archive.every_nth_ok, 50);
     EXPECT_EQ(c->hash.size(), 16u);
     EXPECT_TRUE(std::all_of(c->hash.begin(), c->hash.end(),

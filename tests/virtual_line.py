@@ -191,7 +191,8 @@ class Conveyor:
 class Line:
     """The virtual cell, hotgauged and the pieces between them, in one working folder."""
 
-    def __init__(self, bin_dir, workdir, address, seed=1, temperature=1050.0, config_extra=""):
+    def __init__(self, bin_dir, workdir, address, seed=1, temperature=1050.0, config_extra="",
+                 archive_every_nth_ok=0):
         self.bin_dir, self.workdir, self.address = bin_dir, workdir, address
         self.seed, self.temperature = seed, temperature
         self.procs = []
@@ -203,6 +204,7 @@ class Line:
         self.plc_port = free_port()
         self.axis_port = free_port()  # fixed: a restarted cell comes back on the same one
         self.config_extra = config_extra
+        self.archive_every_nth_ok = archive_every_nth_ok
 
     def start(self):
         self.start_pty()
@@ -273,7 +275,7 @@ results:
   dir: {self.results_dir}
   archive_dir: {self.archive_dir}
   archive_quota_gb: 1
-  archive_every_nth_ok: 0
+  archive_every_nth_ok: {self.archive_every_nth_ok}
 {self.config_extra}"""
         with open(self.config_path, "w") as f:
             f.write(cfg)
