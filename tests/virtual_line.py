@@ -25,6 +25,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 import yaml
@@ -38,6 +39,7 @@ IDLE, BUSY, DONE, FAULT = 1, 2, 3, 4
 TRIGGER, ACK, RESET = 1, 2, 3
 VERDICTS = {0: "none", 1: "OK", 2: "NOK", 3: "NOT_MEASURED", 4: "DEGRADED"}
 INVALID_UM = -0x80000000
+WATCHDOG_S = 2
 # The axis controller's conveyor registers (docs/virtual-cell.md).
 CONVEYOR_REQUEST, CONVEYOR_LOADED = 6, 7
 
@@ -71,11 +73,13 @@ def wait_for(predicate, what, timeout):
 class Process:
     """A child process with its output in a log file; stopped with SIGTERM."""
 
-    def __init__(self, name, argv, workdir):
+    def __init__(self, name, argv, workdir, env=None):
         self.name = name
         self.log_path = os.path.join(workdir, name + ".log")
         self.log = open(self.log_path, "w")
-        self.proc = subprocess.Popen(argv, stdout=self.log, stderr=subprocess.STDOUT)
+        self.proc = subprocess.Popen(argv, stdout=self.log, stderr=subprocess.STDOUT,
+                                     env=None if env is None else {**os.environ, **env})
+
 
     def text(self):
         with open(self.log_path, errors="replace") as f:
@@ -101,6 +105,33 @@ class Process:
                 raise RuntimeError(f"{self.name} did not stop within {timeout} s of SIGTERM")
         self.log.close()
         return self.proc.returncode
+
+
+class NotifySocket:
+    """What systemd would receive from a Type=notify service: sd_notify's datagrams on
+    $NOTIFY_SOCKET, with the time each arrived."""
+
+    def __init__(self, path):
+        self.path = path
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self.sock.bind(path)
+        self.sock.settimeout(0.1)
+        self.messages = []  # (monotonic time, "KEY=VALUE")
+        self.stop = False
+        self.thread = threading.Thread(target=self.run, daemon=True)
+        self.thread.start()
+
+    def run(self):
+        while not self.stop:
+            try:
+                data = self.sock.recv(4096)
+            except socket.timeout:
+                continue
+            now = time.monotonic()
+            self.messages += [(now, kv) for kv in data.decode(errors="replace").split("\n") if kv]
+
+    def values(self, key):
+        return [(t, kv.split("=", 1)[1]) for t, kv in self.messages if kv.startswith(key + "=")]
 
 
 class Plc:
@@ -281,8 +312,11 @@ results:
             f.write(cfg)
 
     def start_daemon(self):
+        # As under systemd: notifications to our socket, a 2 s watchdog (pings every second).
+        self.notify = NotifySocket(os.path.join(self.workdir, "notify"))
+        env = {"NOTIFY_SOCKET": self.notify.path, "WATCHDOG_USEC": str(WATCHDOG_S * 1_000_000)}
         self.daemon = Process("hotgauged", [os.path.join(self.bin_dir, "src/daemon/hotgauged"),
-                                            "--config", self.config_path], self.workdir)
+                                            "--config", self.config_path], self.workdir, env)
         self.procs.append(self.daemon)
         self.daemon.wait_line(r"hotgauged .* up: PLC on port", 60)
 
@@ -382,6 +416,26 @@ def check_results_files(results_dir, parts):
     return csvs, jsonls, seqs
 
 
+def check_notifications(notify):
+    """The systemd protocol: READY once, the cell state in STATUS, the watchdog fed at least
+    every WatchdogSec / 2 from READY to the end, STOPPING at SIGTERM."""
+    time.sleep(0.2)
+    notify.stop = True
+    ready = notify.values("READY")
+    assert len(ready) == 1, f"READY sent {len(ready)} times"
+    status = [v for _, v in notify.values("STATUS")]
+    assert any(v.startswith("busy: part") for v in status), status[:5]
+    assert any(v.startswith("idle") for v in status), status[:5]
+    pings = [t for t, _ in notify.values("WATCHDOG")]
+    stopping = notify.values("STOPPING")
+    assert stopping, "no STOPPING=1"
+    times = [ready[0][0]] + [t for t in pings if t > ready[0][0]] + [stopping[0][0]]
+    gap = max(b - a for a, b in zip(times, times[1:]))
+    assert gap <= WATCHDOG_S * 0.75, f"watchdog gap {gap:.2f} s (WatchdogSec {WATCHDOG_S} s)"
+    print(f"systemd notifications: READY, {len(status)} STATUS, {len(pings)} WATCHDOG "
+          f"(largest gap {gap:.2f} s), STOPPING")
+
+
 def print_logs(workdir, lines=40):
     """The end of the daemon's and the cell's logs, after a failure."""
     for name in ("hotgauged", "virtual-cell"):
@@ -431,6 +485,7 @@ def main():
         print(f"results: {', '.join(os.path.join(line.results_dir, f) for f in csvs + jsonls)} "
               f"(sequence {seqs[0]}..{seqs[-1]})")
         assert rcs.get("hotgauged") == 0, f"hotgauged exited with {rcs.get('hotgauged')}"
+        check_notifications(line.notify)
         assert all(p["state"] == DONE for p in parts), "a part was not measured"
         if a.check_mm is not None:
             assert worst <= a.check_mm, f"worst error {worst:.4f} mm > {a.check_mm} mm"

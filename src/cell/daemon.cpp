@@ -635,12 +635,11 @@ void Daemon::Impl::process(Captured c) {
     entry.result = &r;
     entry.software_version = HOTGAUGE_VERSION;
     entry.config_hash = job.setup->config.hash;
-    if (!c.fault && archive && archive->wants(r, job.sequence)) {
-        if (auto where = archive->store(c.rec, job.sequence, t_result); where)
-            entry.archived_as = where->string();
-        else
-            spdlog::error("seq {}: raw archive: {}", job.sequence, where.error().message);
-    }
+    // The raw recording is written after the registers (it is large, and the PLC is waiting);
+    // the results line names the folder it goes to, and a failure to write it is logged.
+    const bool archiving = !c.fault && archive && archive->wants(r, job.sequence);
+    if (archiving)
+        entry.archived_as = archive->folder(c.rec.part_id, job.sequence, t_result).string();
     core::Result<void> stored =
         log ? log->append(entry) : core::Result<void>(core::make_error(log_error));
     const double store_ms = ms_between(t1, Clock::now());
@@ -664,6 +663,11 @@ void Daemon::Impl::process(Captured c) {
         problem = r.measurement.verdict != measure::Verdict::kOk || r.degraded;
     }
     const std::int64_t published = now_ns();
+    if (archiving) {
+        if (auto where = archive->store(c.rec, job.sequence, t_result); !where)
+            spdlog::error("seq {}: raw archive: {} (the results line names {})", job.sequence,
+                          where.error().message, *entry.archived_as);
+    }
     {
         std::lock_guard lock(stats_mutex);
         PartTiming t;
@@ -680,7 +684,10 @@ void Daemon::Impl::process(Captured c) {
     msg << "part " << r.part_id << " seq " << job.sequence << " recipe " << r.recipe << ": "
         << outcome;
     if (c.last_profile_ns)
-        msg << "; " << (published - c.last_profile_ns) / 1'000'000 << " ms after the last profile";
+        msg << "; " << (published - c.last_profile_ns) / 1'000'000
+            << " ms after the last profile (accelerometer margin " << std::lround(c.accel_wait_ms)
+            << " ms, pipeline " << std::lround(pipeline_ms) << " ms, files "
+            << std::lround(store_ms) << " ms)";
     for (const auto& why : r.degraded_reasons) msg << "; degraded: " << why;
     if (stored) msg << "; " << log->last_csv().string();
     log_part({job.sequence, r.part_id, r.recipe, outcome.substr(0, outcome.find(' ')), msg.str(),

@@ -71,12 +71,16 @@ bool RawArchive::wants(const pipeline::PartResult& r, std::uint64_t sequence) co
 
 std::uint64_t RawArchive::used_bytes() const { return tree_bytes(config_.dir); }
 
-core::Result<fs::path> RawArchive::store(const core::Recording& rec, std::uint64_t sequence,
-                                         std::int64_t time_ns) {
+fs::path RawArchive::folder(const std::string& part_id, std::uint64_t sequence,
+                            std::int64_t time_ns) const {
     char seq[32];
     std::snprintf(seq, sizeof seq, "%012llu", static_cast<unsigned long long>(sequence));
-    const fs::path where =
-        config_.dir / local_date(time_ns) / (std::string(seq) + "_" + safe_name(rec.part_id));
+    return config_.dir / local_date(time_ns) / (std::string(seq) + "_" + safe_name(part_id));
+}
+
+core::Result<fs::path> RawArchive::store(const core::Recording& rec, std::uint64_t sequence,
+                                         std::int64_t time_ns) {
+    const fs::path where = folder(rec.part_id, sequence, time_ns);
     if (auto ok = io::write_recording(rec, where); !ok) return ok.error();
     // Within the quota again: oldest first, never the one just written.
     std::uint64_t used = used_bytes();

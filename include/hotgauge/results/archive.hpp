@@ -30,6 +30,9 @@ class RawArchive {
     // Returns the new recording's folder.
     core::Result<std::filesystem::path> store(const core::Recording& recording,
                                               std::uint64_t sequence, std::int64_t time_ns);
+    // The folder store() writes for this part (so that a results line can name it first).
+    std::filesystem::path folder(const std::string& part_id, std::uint64_t sequence,
+                                 std::int64_t time_ns) const;
     // Bytes the archived recordings take now.
     std::uint64_t used_bytes() const;
     const ArchiveConfig& config() const { return config_; }
