@@ -58,6 +58,7 @@ bench: build
 	$(BUILD)/tests/bench/hotgauge_bench_match
 	$(BUILD)/tests/bench/hotgauge_bench_acquire
 	$(BUILD)/tests/bench/hotgauge_bench_plc
+	/usr/bin/python3 tests/bench/daemon_latency.py $(BUILD) --parts 5
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')

@@ -21,7 +21,6 @@ import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -31,29 +30,19 @@ BIN_DIR = sys.argv[1]
 ADDRESS = "127.0.0.8"  # this test's own camera address
 
 
-class UdpRelay:
+class UdpRelay(vl.DatagramReceiver):
     """Passes the accelerometer's datagrams on to the daemon while `on`."""
 
     def __init__(self, to_port):
-        self.rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.rx.bind(("127.0.0.1", 0))
-        self.rx.settimeout(0.1)
-        self.port = self.rx.getsockname()[1]
         self.tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.to = ("127.0.0.1", to_port)
         self.on = True
-        self.stop = False
-        self.thread = threading.Thread(target=self.run, daemon=True)
-        self.thread.start()
+        super().__init__(socket.AF_INET, ("127.0.0.1", 0))
+        self.port = self.sock.getsockname()[1]
 
-    def run(self):
-        while not self.stop:
-            try:
-                data = self.rx.recv(65536)
-            except socket.timeout:
-                continue
-            if self.on:
-                self.tx.sendto(data, self.to)
+    def on_datagram(self, data):
+        if self.on:
+            self.tx.sendto(data, self.to)
 
 
 def jsonl(line):

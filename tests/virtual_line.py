@@ -107,16 +107,13 @@ class Process:
         return self.proc.returncode
 
 
-class NotifySocket:
-    """What systemd would receive from a Type=notify service: sd_notify's datagrams on
-    $NOTIFY_SOCKET, with the time each arrived."""
+class DatagramReceiver:
+    """A datagram socket read on its own thread; each datagram goes to on_datagram()."""
 
-    def __init__(self, path):
-        self.path = path
-        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-        self.sock.bind(path)
+    def __init__(self, family, address):
+        self.sock = socket.socket(family, socket.SOCK_DGRAM)
+        self.sock.bind(address)
         self.sock.settimeout(0.1)
-        self.messages = []  # (monotonic time, "KEY=VALUE")
         self.stop = False
         self.thread = threading.Thread(target=self.run, daemon=True)
         self.thread.start()
@@ -124,11 +121,24 @@ class NotifySocket:
     def run(self):
         while not self.stop:
             try:
-                data = self.sock.recv(4096)
+                data = self.sock.recv(65536)
             except socket.timeout:
                 continue
-            now = time.monotonic()
-            self.messages += [(now, kv) for kv in data.decode(errors="replace").split("\n") if kv]
+            self.on_datagram(data)
+
+
+class NotifySocket(DatagramReceiver):
+    """What systemd would receive from a Type=notify service: sd_notify's datagrams on
+    $NOTIFY_SOCKET, with the time each arrived."""
+
+    def __init__(self, path):
+        self.path = path
+        self.messages = []  # (monotonic time, "KEY=VALUE")
+        super().__init__(socket.AF_UNIX, path)
+
+    def on_datagram(self, data):
+        now = time.monotonic()
+        self.messages += [(now, kv) for kv in data.decode(errors="replace").split("\n") if kv]
 
     def values(self, key):
         return [(t, kv.split("=", 1)[1]) for t, kv in self.messages if kv.startswith(key + "=")]
