@@ -323,6 +323,20 @@ void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
         return;
     }
     const plc::TriggerRequest& t = ev.trigger;
+    const auto r = setup->recipes.find(t.recipe_slot);
+    if (r == setup->recipes.end()) {
+        // Refused before it becomes a part: no sequence number, no row; the PLC and the
+        // journal get the reason.
+        log_part({0, std::to_string(t.part_id), "slot " + std::to_string(t.recipe_slot), "FAULT",
+                  "part " + std::to_string(t.part_id) + ": no recipe in slot " +
+                      std::to_string(t.recipe_slot) + ": PLC fault 202",
+                  true});
+        server->fault(code(plc::ErrorCode::kUnknownRecipe));
+        std::lock_guard lock(stats_mutex);
+        ++stats.triggers;
+        ++stats.failed;
+        return;
+    }
     Job job;
     job.trigger = t;
     job.setup = setup;
@@ -330,18 +344,6 @@ void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
         std::lock_guard lock(stats_mutex);
         job.sequence = stats.next_sequence++;
         ++stats.triggers;
-    }
-    const auto r = setup->recipes.find(t.recipe_slot);
-    if (r == setup->recipes.end()) {
-        log_part({job.sequence, std::to_string(t.part_id), "slot " + std::to_string(t.recipe_slot),
-                  "FAULT",
-                  "part " + std::to_string(t.part_id) + " (seq " + std::to_string(job.sequence) +
-                      "): no recipe in slot " + std::to_string(t.recipe_slot) + ": PLC fault 202",
-                  true});
-        server->fault(code(plc::ErrorCode::kUnknownRecipe));
-        std::lock_guard lock(stats_mutex);
-        ++stats.failed;
-        return;
     }
     job.recipe = &r->second;
     job.faces = faces_to_scan(*setup, r->second, t.face);

@@ -1,0 +1,177 @@
+// The daemon's cell logic in-process (no camera): what happens to a trigger that cannot be
+// measured, sequence numbers across restarts, config reload, stop. The camera and the whole
+// line are in the integration tests (virtual_line.py, daemon_faults_test.py); this one also
+// runs under ASan/UBSan.
+#include <gtest/gtest.h>
+#include <modbus.h>
+
+#include <chrono>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "hotgauge/cell/daemon.hpp"
+#include "hotgauge/plc/register_map.hpp"
+#include "temp_dir.hpp"
+
+namespace hotgauge {
+namespace {
+
+using namespace std::chrono_literals;
+
+std::string config_text(const std::filesystem::path& results) {
+    const std::string src = HOTGAUGE_SOURCE_DIR;
+    return "cell: " + src + "/config/cell.yaml\n" + "faces: [top, bottom, side1, side2]\n" +
+           "recipes:\n  1: " + src + "/config/parts/hub-a.yaml\n" +
+           "camera:\n  id: NO-SUCH-CAMERA\n  mode: peaks\n  height: 10\n  scan_s: 0.5\n" +
+           "accelerometer:\n  source: none\n" + "axis:\n  kind: none\n" +
+           "plc:\n  bind_address: 127.0.0.1\n  port: 0\n" + "results:\n  dir: " + results.string() +
+           "\n  archive_dir: " + (results / "archive").string() + "\n";
+}
+
+void write(const std::filesystem::path& p, const std::string& text) { std::ofstream(p) << text; }
+
+// A PLC on the daemon's port.
+class Plc {
+  public:
+    explicit Plc(int port) : ctx_(modbus_new_tcp("127.0.0.1", port)) {
+        modbus_set_response_timeout(ctx_, 2, 0);
+        ok_ = modbus_connect(ctx_) == 0;
+    }
+    ~Plc() {
+        modbus_close(ctx_);
+        modbus_free(ctx_);
+    }
+    bool ok() const { return ok_; }
+    std::uint16_t input(int address) {
+        std::uint16_t v = 0xFFFF;
+        modbus_read_input_registers(ctx_, address, 1, &v);
+        return v;
+    }
+    void command(std::uint16_t cmd, std::uint16_t slot = 1, std::uint16_t face = 1) {
+        const std::uint16_t regs[6] = {cmd, 0, 77, slot, face, 0};
+        modbus_write_registers(ctx_, 0, cmd == 1 ? 6 : 1, regs);
+    }
+    // Waits for the state register to read `state`; false after `timeout`.
+    bool wait_state(plc::State state, std::chrono::milliseconds timeout) {
+        const auto end = std::chrono::steady_clock::now() + timeout;
+        while (std::chrono::steady_clock::now() < end) {
+            if (input(plc::ir::kState) == static_cast<std::uint16_t>(state)) return true;
+            std::this_thread::sleep_for(10ms);
+        }
+        return false;
+    }
+
+  private:
+    modbus_t* ctx_;
+    bool ok_ = false;
+};
+
+std::vector<std::string> lines_of(const std::filesystem::path& p) {
+    std::ifstream in(p);
+    std::vector<std::string> out;
+    for (std::string line; std::getline(in, line);) out.push_back(line);
+    return out;
+}
+
+TEST(Daemon, ACameraThatIsNotThereFailsThePartWithItsReasonAndTheDaemonGoesOn) {
+    test::TempDir dir;
+    const auto results = dir.path / "results";
+    std::filesystem::create_directories(results);
+    // Yesterday's file ended at sequence 41: numbering goes on from there.
+    write(results / "2026-11-21.jsonl", "{\"sequence\": 40}\n{\"sequence\": 41}\n");
+    const auto config = dir.path / "hotgauged.yaml";
+    write(config, config_text(results));
+
+    auto setup = cell::load_setup(config);
+    ASSERT_TRUE(setup) << setup.error().message;
+    std::vector<std::string> status;
+    std::mutex status_mutex;
+    bool ready = false;
+    cell::Supervisor sup;
+    sup.ready = [&] { ready = true; };
+    sup.status = [&](const std::string& s) {
+        std::lock_guard lock(status_mutex);
+        status.push_back(s);
+    };
+    auto daemon = cell::Daemon::start(*setup, sup);
+    ASSERT_TRUE(daemon) << daemon.error().message;
+    EXPECT_TRUE(ready);
+    EXPECT_EQ((*daemon)->stats().next_sequence, 42u);
+    std::thread control([&] { (*daemon)->run(); });
+
+    Plc plc((*daemon)->plc_port());
+    ASSERT_TRUE(plc.ok());
+    // No recipe in slot 9: fault 202 at once, and no sequence number is used.
+    plc.command(1, 9);
+    ASSERT_TRUE(plc.wait_state(plc::State::kFault, 5s));
+    EXPECT_EQ(plc.input(plc::ir::kErrorCode), 202);
+    plc.command(3);
+    ASSERT_TRUE(plc.wait_state(plc::State::kIdle, 5s));
+
+    // Slot 1, top face: the camera is not there, the part fails with 203 and has its row.
+    plc.command(1, 1, 1);
+    ASSERT_TRUE(plc.wait_state(plc::State::kFault, 30s));
+    EXPECT_EQ(plc.input(plc::ir::kErrorCode), 203);
+    const auto stats = (*daemon)->stats();
+    EXPECT_EQ(stats.triggers, 2u);
+    EXPECT_EQ(stats.failed, 2u);
+    EXPECT_EQ(stats.next_sequence, 43u);
+    std::filesystem::path jsonl;
+    for (const auto& e : std::filesystem::directory_iterator(results))
+        if (e.path().extension() == ".jsonl" && e.path().filename() != "2026-11-21.jsonl")
+            jsonl = e.path();
+    ASSERT_FALSE(jsonl.empty()) << "no results file for today";
+    const auto lines = lines_of(jsonl);
+    ASSERT_EQ(lines.size(), 1u);
+    EXPECT_NE(lines[0].find("\"sequence\":42"), std::string::npos) << lines[0];
+    EXPECT_NE(lines[0].find("NO-SUCH-CAMERA"), std::string::npos) << "the reason names the camera";
+    EXPECT_NE(lines[0].find("NOT_MEASURED"), std::string::npos);
+    auto csv = jsonl;
+    csv.replace_extension(".csv");
+    EXPECT_EQ(lines_of(csv).size(), 2u) << "header and one row";
+
+    // A broken config at reload is rejected and the daemon keeps serving; a good one is taken.
+    write(config, "camera: [unclosed\n");
+    (*daemon)->request_reload();
+    const auto until = std::chrono::steady_clock::now() + 5s;
+    while ((*daemon)->stats().rejected_reloads == 0 && std::chrono::steady_clock::now() < until)
+        std::this_thread::sleep_for(20ms);
+    EXPECT_EQ((*daemon)->stats().rejected_reloads, 1u);
+    plc.command(3);
+    EXPECT_TRUE(plc.wait_state(plc::State::kIdle, 5s)) << "still serving the PLC";
+    write(config, config_text(results));
+    (*daemon)->request_reload();
+    const auto until2 = std::chrono::steady_clock::now() + 5s;
+    while ((*daemon)->stats().reloads == 0 && std::chrono::steady_clock::now() < until2)
+        std::this_thread::sleep_for(20ms);
+    EXPECT_EQ((*daemon)->stats().reloads, 1u);
+    {
+        std::lock_guard lock(status_mutex);
+        EXPECT_TRUE(std::any_of(status.begin(), status.end(),
+                                [](const auto& s) { return s.rfind("reload rejected", 0) == 0; }));
+        EXPECT_TRUE(std::any_of(status.begin(), status.end(),
+                                [](const auto& s) { return s.rfind("busy: part 77", 0) == 0; }));
+    }
+
+    const auto t0 = std::chrono::steady_clock::now();
+    (*daemon)->request_stop();
+    control.join();
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, 5s);
+}
+
+TEST(Daemon, ASetupWithAMissingRecipeIsAnErrorNamingIt) {
+    test::TempDir dir;
+    const auto config = dir.path / "hotgauged.yaml";
+    std::string text = config_text(dir.path / "results");
+    const std::string from = "/config/parts/hub-a.yaml";
+    text.replace(text.find(from), from.size(), "/config/parts/no-such-part.yaml");
+    write(config, text);
+    auto setup = cell::load_setup(config);
+    ASSERT_FALSE(setup);
+    EXPECT_NE(setup.error().message.find("no-such-part.yaml"), std::string::npos)
+        << setup.error().message;
+}
+
+}  // namespace
+}  // namespace hotgauge
