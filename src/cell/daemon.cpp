@@ -416,13 +416,12 @@ void Daemon::Impl::shutdown() {
 
 void Daemon::Impl::prepare_acquisition(const std::shared_ptr<const Setup>& s) {
     if (acq_setup == s) return;
-    const bool camera_changed =
-        !acq_setup || acq_setup->config.acquisition.camera.id != s->config.acquisition.camera.id;
+    // A new configuration (start, reload): the camera is opened again with its settings, so
+    // that nothing of the old one stays applied.
     acq_setup = s;
     const auto& a = s->config.acquisition;
-    if (camera_changed || !session)
-        session = std::make_unique<acquire::CameraSession>(a.camera, a.scan, *s->triangulation,
-                                                           s->exposure);
+    session =
+        std::make_unique<acquire::CameraSession>(a.camera, a.scan, *s->triangulation, s->exposure);
     axis = s->config.axis.kind == "modbus" ? std::make_unique<ModbusAxis>(s->config.axis) : nullptr;
 }
 
