@@ -12,6 +12,7 @@
 
 #include "hotgauge/cell/daemon.hpp"
 #include "hotgauge/plc/register_map.hpp"
+#include "hotgauge/vcell/axis_server.hpp"
 #include "temp_dir.hpp"
 
 namespace hotgauge {
@@ -19,12 +20,13 @@ namespace {
 
 using namespace std::chrono_literals;
 
-std::string config_text(const std::filesystem::path& results) {
+std::string config_text(const std::filesystem::path& results,
+                        const std::string& axis = "axis:\n  kind: none\n") {
     const std::string src = HOTGAUGE_SOURCE_DIR;
     return "cell: " + src + "/config/cell.yaml\n" + "faces: [top, bottom, side1, side2]\n" +
            "recipes:\n  1: " + src + "/config/parts/hub-a.yaml\n" +
            "camera:\n  id: NO-SUCH-CAMERA\n  mode: peaks\n  height: 10\n  scan_s: 0.5\n" +
-           "accelerometer:\n  source: none\n" + "axis:\n  kind: none\n" +
+           "accelerometer:\n  source: none\n" + axis +
            "plc:\n  bind_address: 127.0.0.1\n  port: 0\n" + "results:\n  dir: " + results.string() +
            "\n  archive_dir: " + (results / "archive").string() + "\n";
 }
@@ -158,6 +160,32 @@ TEST(Daemon, ACameraThatIsNotThereFailsThePartWithItsReasonAndTheDaemonGoesOn) {
     (*daemon)->request_stop();
     control.join();
     EXPECT_LT(std::chrono::steady_clock::now() - t0, 5s);
+}
+
+TEST(Daemon, AnAxisThatDoesNotArriveInTimeIsATimeout) {
+    vcell::AxisServerConfig ac;
+    ac.move_time_s = 30.0;  // far longer than the daemon's axis timeout
+    auto axis = vcell::AxisServer::start(ac, {});
+    ASSERT_TRUE(axis) << axis.error().message;
+    test::TempDir dir;
+    const auto config = dir.path / "hotgauged.yaml";
+    write(config, config_text(dir.path / "results",
+                              "axis:\n  kind: modbus\n  address: 127.0.0.1:" +
+                                  std::to_string((*axis)->port()) +
+                                  "\n  faces: {top: 1, bottom: 2, side1: 3, side2: 4}\n"
+                                  "  timeout_ms: 300\n"));
+    auto setup = cell::load_setup(config);
+    ASSERT_TRUE(setup) << setup.error().message;
+    auto daemon = cell::Daemon::start(*setup);
+    ASSERT_TRUE(daemon) << daemon.error().message;
+    std::thread control([&] { (*daemon)->run(); });
+    Plc plc((*daemon)->plc_port());
+    ASSERT_TRUE(plc.ok());
+    plc.command(1, 1, 2);  // the bottom face: the axis must move
+    ASSERT_TRUE(plc.wait_state(plc::State::kFault, 30s));
+    EXPECT_EQ(plc.input(plc::ir::kErrorCode), 204);
+    (*daemon)->request_stop();
+    control.join();
 }
 
 TEST(Daemon, ASetupWithAMissingRecipeIsAnErrorNamingIt) {

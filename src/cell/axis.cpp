@@ -54,6 +54,7 @@ core::Result<void> ModbusAxis::connect() {
 }
 
 core::Result<bool> ModbusAxis::move_to(int position) {
+    timed_out_ = false;
     const bool reused = ctx_ != nullptr;
     if (auto ok = connect(); !ok) return ok.error();
     std::uint16_t regs[4] = {};
@@ -83,9 +84,11 @@ core::Result<bool> ModbusAxis::move_to(int position) {
             return fail("fault while moving to position " + std::to_string(position));
         if (regs[kCommand] == 0 && regs[kState] == kInPosition && regs[kCurrent] == position)
             return true;
-        if (std::chrono::steady_clock::now() > deadline)
+        if (std::chrono::steady_clock::now() > deadline) {
+            timed_out_ = true;
             return fail("not in position " + std::to_string(position) + " after " +
                         std::to_string(timeout_.count()) + " ms");
+        }
     }
 }
 

@@ -507,7 +507,10 @@ Captured Daemon::Impl::acquire_part(Job next) {
                 std::this_thread::sleep_for(std::chrono::nanoseconds(t_free_ns - now_ns()));
             auto moved = axis->move_to(pos->second);
             if (!moved) {
-                fail(plc::ErrorCode::kDeviceLost, moved.error().message);
+                // An axis that answers but does not arrive in time is a timeout (204); one that
+                // is gone or faulted is a lost device (203).
+                fail(axis->timed_out() ? plc::ErrorCode::kTimeout : plc::ErrorCode::kDeviceLost,
+                     moved.error().message);
                 break;
             }
             if (accel && *moved)

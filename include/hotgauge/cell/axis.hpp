@@ -25,6 +25,9 @@ class ModbusAxis {
     // Moves to controller position `position` (1..N) and returns once it is there: true if it
     // moved, false if it was there already. Errors name the controller's address.
     core::Result<bool> move_to(int position);
+    // Whether the last failed move failed by taking longer than the timeout (the controller
+    // answered but the axis did not arrive).
+    bool timed_out() const { return timed_out_; }
 
   private:
     core::Result<void> connect();
@@ -36,6 +39,7 @@ class ModbusAxis {
     int unit_id_ = 1;
     std::chrono::milliseconds timeout_;
     void* ctx_ = nullptr;  // modbus_t, kept out of the header
+    bool timed_out_ = false;
 };
 
 }  // namespace hotgauge::cell
