@@ -181,7 +181,19 @@ TEST(Daemon, AnAxisThatDoesNotArriveInTimeIsATimeout) {
     std::thread control([&] { (*daemon)->run(); });
     Plc plc((*daemon)->plc_port());
     ASSERT_TRUE(plc.ok());
+    // A cycle the PLC resets while BUSY: its failure must not reach the registers afterwards.
     plc.command(1, 1, 2);  // the bottom face: the axis must move
+    ASSERT_TRUE(plc.wait_state(plc::State::kBusy, 5s));
+    plc.command(3);
+    ASSERT_TRUE(plc.wait_state(plc::State::kIdle, 5s));
+    const auto until = std::chrono::steady_clock::now() + 10s;
+    while ((*daemon)->stats().failed == 0 && std::chrono::steady_clock::now() < until)
+        std::this_thread::sleep_for(20ms);
+    EXPECT_EQ((*daemon)->stats().failed, 1u) << "the abandoned part is accounted for";
+    std::this_thread::sleep_for(200ms);
+    EXPECT_EQ(plc.input(plc::ir::kState), static_cast<std::uint16_t>(plc::State::kIdle));
+    // The next part: the axis does not arrive, a timeout.
+    plc.command(1, 1, 3);
     ASSERT_TRUE(plc.wait_state(plc::State::kFault, 30s));
     EXPECT_EQ(plc.input(plc::ir::kErrorCode), 204);
     (*daemon)->request_stop();

@@ -651,9 +651,15 @@ void Daemon::Impl::process(Captured c) {
     // Registers last: a result the PLC can acknowledge is already on disk.
     std::string outcome;
     bool problem = true;
-    if (!stored) {
+    if (!stored)
         spdlog::error("seq {}: results NOT stored: {}; the result is only in this log: {}",
                       job.sequence, stored.error().message, pipeline::to_json(r));
+    if (abandoned == job.sequence) {
+        // The PLC reset this cycle and has moved on: neither a result nor a fault of it may
+        // reach the registers now.
+        outcome = (c.fault ? std::string("NOT_MEASURED (") + c.failure + ")" : verdict_text(r)) +
+                  ", not published: the PLC reset the cycle";
+    } else if (!stored) {
         server->fault(code(plc::ErrorCode::kNotStored));
         outcome = "FAULT 206 (result not stored: " + stored.error().message + ")";
     } else if (c.fault) {
