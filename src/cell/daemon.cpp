@@ -226,6 +226,12 @@ struct Job {
     std::vector<std::string> faces;
 };
 
+// Why a part could not be scanned: the PLC's fault code and the reason.
+struct Failure {
+    plc::ErrorCode code;
+    std::string why;
+};
+
 // What acquisition hands to processing: the recording, or why there is none.
 struct Captured {
     Job job;
@@ -288,10 +294,19 @@ struct Daemon::Impl {
 
     void acquisition_loop();
     Captured acquire_part(Job job);
+    std::optional<Failure> scan_face(const Setup& s, const std::string& name, double margin_s,
+                                     std::optional<double> exposure_temperature,
+                                     core::Recording& rec);
+    void read_part_temperature(Captured& c) const;
+    void attach_accelerometer(Captured& c, double margin_s) const;
     void prepare_acquisition(const std::shared_ptr<const Setup>& s);
     void await_accel_history(double margin_s) const;
     void processing_loop();
     void process(Captured c);
+    pipeline::PartResult measure_captured(const Captured& c) const;
+    // The registers: the result, or the fault; returns the outcome for the log.
+    std::string publish(const Captured& c, const pipeline::PartResult& r,
+                        const core::Result<void>& stored, bool& problem);
     void prepare_results(const std::shared_ptr<const Setup>& s);
     void finish_failed(Captured& c, pipeline::PartResult& r);
 };
@@ -461,14 +476,9 @@ Captured Daemon::Impl::acquire_part(Job next) {
     c.rec.part_id = std::to_string(job.trigger.part_id);
     c.rec.recipe = job.recipe->name;
     c.rec.captured_at = iso8601_utc(now_ns());
-    auto fail = [&](plc::ErrorCode e, const std::string& why) {
-        c.fault = code(e);
-        c.failure = why;
-        c.rec.faces.clear();
-    };
     // The exposure is set from the temperature at the start; the thermal correction uses the
-    // reading taken after the scans (below), when the pyrometer has surely seen this part and
-    // not the one before.
+    // reading taken after the scans, when the pyrometer has surely seen this part and not the
+    // one before.
     std::optional<double> exposure_temperature;
     if (pyrometer) {
         if (const plc::PyrometerReading t = pyrometer->latest(); t.valid())
@@ -481,91 +491,103 @@ Captured Daemon::Impl::acquire_part(Job next) {
     // the part is here now; a long one fails the part at once with the reason.
     if (const auto wait = session->backoff_remaining(); wait <= kMaxCameraWait)
         std::this_thread::sleep_for(wait);
-    std::int64_t t_free_ns = 0;  // the axis may move from then on
+    std::optional<Failure> failed;
     for (const auto& name : job.faces) {
         if (abandoned == job.sequence || stop) {
-            fail(plc::ErrorCode::kMeasurementFailed,
-                 stop ? "daemon stopping (SIGTERM)" : "cycle reset by the PLC");
+            failed = Failure{plc::ErrorCode::kMeasurementFailed,
+                             stop ? "daemon stopping (SIGTERM)" : "cycle reset by the PLC"};
             break;
         }
-        const auto face = std::find_if(s.cell.faces.begin(), s.cell.faces.end(),
-                                       [&](const auto& f) { return f.name == name; });
-        if (face == s.cell.faces.end()) {
-            fail(plc::ErrorCode::kMeasurementFailed, "no face '" + name + "' in the cell");
-            break;
-        }
-        if (axis) {
-            const auto pos = s.config.axis.faces.find(name);
-            if (pos == s.config.axis.faces.end()) {
-                fail(plc::ErrorCode::kMeasurementFailed,
-                     "axis: no position for face '" + name + "' in the config");
-                break;
-            }
-            // The accelerometer's record of the last face runs a margin past its scan; the
-            // move's jolt must stay out of it, and out of the next face's record before it.
-            if (accel && t_free_ns > now_ns())
-                std::this_thread::sleep_for(std::chrono::nanoseconds(t_free_ns - now_ns()));
-            auto moved = axis->move_to(pos->second);
-            if (!moved) {
-                // An axis that answers but does not arrive in time is a timeout (204); one that
-                // is gone or faulted is a lost device (203).
-                fail(axis->timed_out() ? plc::ErrorCode::kTimeout : plc::ErrorCode::kDeviceLost,
-                     moved.error().message);
-                break;
-            }
-            if (accel && *moved)
-                std::this_thread::sleep_for(std::chrono::duration<double>(margin_s));
-        }
-        acquire::ScanConfig sc = s.config.acquisition.scan;
-        sc.face = name;
-        sc.T_world_camera = face->T_world_camera;
-        sc.scan_direction = face->scan_direction;
-        sc.R_camera_accel = face->R_camera_accel;
-        session->set_scan_config(sc);
-        acq_beat = steady_ns();
-        if (accel) await_accel_history(margin_s);
-        auto out = session->scan(s.config.acquisition.scan_s, exposure_temperature);
-        acq_beat = steady_ns();
-        if (!out) {
-            fail(plc::ErrorCode::kDeviceLost, "face " + name + ": " + out.error().message);
-            break;
-        }
-        c.rec.faces.push_back(std::move(out->face));
-        t_free_ns =
-            c.rec.faces.back().profile_times_ns.back() + static_cast<std::int64_t>(margin_s * 1e9);
+        failed = scan_face(s, name, margin_s, exposure_temperature, c.rec);
+        if (failed) break;
     }
-    if (c.fault || c.rec.faces.empty()) {
-        if (!c.fault) fail(plc::ErrorCode::kMeasurementFailed, "no face to scan");
+    if (!failed && c.rec.faces.empty())
+        failed = Failure{plc::ErrorCode::kMeasurementFailed, "no face to scan"};
+    if (failed) {
+        c.fault = code(failed->code);
+        c.failure = failed->why;
+        c.rec.faces.clear();
         return c;
     }
     c.last_profile_ns = c.rec.faces.back().profile_times_ns.back();
-    if (pyrometer) {
-        const plc::PyrometerReading t = pyrometer->latest();
-        if (t.valid())
-            c.rec.temperature_c = t.temperature_c;
-        else
-            c.degraded.push_back("part temperature unknown: pyrometer " +
-                                 (t.last_error.empty()
-                                      ? std::string(t.stale ? "stale" : "out of range")
-                                      : t.last_error));
+    read_part_temperature(c);
+    if (accel) attach_accelerometer(c, margin_s);
+    return c;
+}
+
+std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string& name,
+                                               double margin_s,
+                                               std::optional<double> exposure_temperature,
+                                               core::Recording& rec) {
+    const auto face = std::find_if(s.cell.faces.begin(), s.cell.faces.end(),
+                                   [&](const auto& f) { return f.name == name; });
+    if (face == s.cell.faces.end())
+        return Failure{plc::ErrorCode::kMeasurementFailed, "no face '" + name + "' in the cell"};
+    if (axis) {
+        const auto pos = s.config.axis.faces.find(name);
+        if (pos == s.config.axis.faces.end())
+            return Failure{plc::ErrorCode::kMeasurementFailed,
+                           "axis: no position for face '" + name + "' in the config"};
+        // The accelerometer's record of the last face runs a margin past its scan; the move's
+        // jolt must stay out of it, and out of the next face's record before it.
+        if (accel && !rec.faces.empty()) {
+            const std::int64_t t_free = rec.faces.back().profile_times_ns.back() +
+                                        static_cast<std::int64_t>(margin_s * 1e9);
+            if (t_free > now_ns())
+                std::this_thread::sleep_for(std::chrono::nanoseconds(t_free - now_ns()));
+        }
+        auto moved = axis->move_to(pos->second);
+        // An axis that answers but does not arrive in time is a timeout (204); one that is gone
+        // or faulted is a lost device (203).
+        if (!moved)
+            return Failure{
+                axis->timed_out() ? plc::ErrorCode::kTimeout : plc::ErrorCode::kDeviceLost,
+                moved.error().message};
+        if (accel && *moved) std::this_thread::sleep_for(std::chrono::duration<double>(margin_s));
     }
-    if (accel) {
-        // The compensation needs the accelerometer record a margin past the last profile.
-        const auto t0 = Clock::now();
-        const auto margin_ns = static_cast<std::int64_t>(margin_s * 1e9);
-        ring->wait_for(c.last_profile_ns + margin_ns,
-                       milliseconds(static_cast<long long>(500 + 1000 * margin_s)));
-        c.accel_wait_ms = ms_between(t0, Clock::now());
-        for (auto& f : c.rec.faces) {
-            const accel::AccelWindow w = ring->copy_range(f.profile_times_ns.front() - margin_ns,
-                                                          f.profile_times_ns.back() + margin_ns);
-            for (const auto& smp : w.samples) {
-                f.accel_times_ns.push_back(smp.t_ns);
-                f.accel_mps2.insert(f.accel_mps2.end(), {smp.x_mps2, smp.y_mps2, smp.z_mps2});
-            }
+    acquire::ScanConfig sc = s.config.acquisition.scan;
+    sc.face = name;
+    sc.T_world_camera = face->T_world_camera;
+    sc.scan_direction = face->scan_direction;
+    sc.R_camera_accel = face->R_camera_accel;
+    session->set_scan_config(sc);
+    acq_beat = steady_ns();
+    if (accel) await_accel_history(margin_s);
+    auto out = session->scan(s.config.acquisition.scan_s, exposure_temperature);
+    acq_beat = steady_ns();
+    if (!out)
+        return Failure{plc::ErrorCode::kDeviceLost, "face " + name + ": " + out.error().message};
+    rec.faces.push_back(std::move(out->face));
+    return std::nullopt;
+}
+
+void Daemon::Impl::read_part_temperature(Captured& c) const {
+    if (!pyrometer) return;
+    const plc::PyrometerReading t = pyrometer->latest();
+    if (t.valid()) {
+        c.rec.temperature_c = t.temperature_c;
+        return;
+    }
+    c.degraded.push_back(
+        "part temperature unknown: pyrometer " +
+        (t.last_error.empty() ? std::string(t.stale ? "stale" : "out of range") : t.last_error));
+}
+
+void Daemon::Impl::attach_accelerometer(Captured& c, double margin_s) const {
+    // The compensation needs the accelerometer record a margin past the last profile.
+    const auto t0 = Clock::now();
+    const auto margin_ns = static_cast<std::int64_t>(margin_s * 1e9);
+    ring->wait_for(c.last_profile_ns + margin_ns,
+                   milliseconds(static_cast<long long>(500 + 1000 * margin_s)));
+    c.accel_wait_ms = ms_between(t0, Clock::now());
+    for (auto& f : c.rec.faces) {
+        const accel::AccelWindow w = ring->copy_range(f.profile_times_ns.front() - margin_ns,
+                                                      f.profile_times_ns.back() + margin_ns);
+        for (const auto& smp : w.samples) {
+            f.accel_times_ns.push_back(smp.t_ns);
+            f.accel_mps2.insert(f.accel_mps2.end(), {smp.x_mps2, smp.y_mps2, smp.z_mps2});
         }
     }
-    return c;
 }
 
 // ---- processing ----------------------------------------------------------------------------
@@ -605,10 +627,8 @@ void Daemon::Impl::processing_loop() {
     }
 }
 
-void Daemon::Impl::process(Captured c) {
+pipeline::PartResult Daemon::Impl::measure_captured(const Captured& c) const {
     const Job& job = c.job;
-    prepare_results(job.setup);
-    const auto t0 = Clock::now();
     pipeline::PartResult r;
     if (c.fault) {
         r.part_id = c.rec.part_id;
@@ -617,19 +637,50 @@ void Daemon::Impl::process(Captured c) {
         r.measurement = measure::unmeasured(*job.recipe, c.rec, c.failure);
         r.measurement.temperature_c = c.rec.temperature_c;
         r.warnings.push_back(c.failure);
-    } else {
-        pipeline::PipelineOptions opt;
-        opt.model = job.setup->models.at(job.trigger.recipe_slot).get();
-        opt.compensate = true;
-        opt.compensation.clock_offset_s = 0.0;
-        r = pipeline::run(c.rec, *job.recipe, opt);
-        for (const auto& why : c.degraded) {
-            r.degraded = true;
-            r.degraded_reasons.push_back(why);
-        }
-        if (c.accel_wait_ms > 0)
-            r.stage_ms.emplace(r.stage_ms.begin(), "accel_wait", c.accel_wait_ms);
+        return r;
     }
+    pipeline::PipelineOptions opt;
+    opt.model = job.setup->models.at(job.trigger.recipe_slot).get();
+    opt.compensate = true;
+    r = pipeline::run(c.rec, *job.recipe, opt);
+    for (const auto& why : c.degraded) {
+        r.degraded = true;
+        r.degraded_reasons.push_back(why);
+    }
+    if (c.accel_wait_ms > 0) r.stage_ms.emplace(r.stage_ms.begin(), "accel_wait", c.accel_wait_ms);
+    return r;
+}
+
+std::string Daemon::Impl::publish(const Captured& c, const pipeline::PartResult& r,
+                                  const core::Result<void>& stored, bool& problem) {
+    const Job& job = c.job;
+    problem = true;
+    if (abandoned == job.sequence) {
+        // The PLC reset this cycle and has moved on: neither a result nor a fault of it may
+        // reach the registers now.
+        return (c.fault ? std::string("NOT_MEASURED (") + c.failure + ")" : verdict_text(r)) +
+               ", not published: the PLC reset the cycle";
+    }
+    if (!stored) {
+        server->fault(code(plc::ErrorCode::kNotStored));
+        return "FAULT 206 (result not stored: " + stored.error().message + ")";
+    }
+    if (c.fault) {
+        server->fault(c.fault);
+        return "FAULT " + std::to_string(c.fault) + " (" +
+               plc::to_string(static_cast<plc::ErrorCode>(c.fault)) + "): " + c.failure;
+    }
+    if (auto ok = server->finish(job.trigger.trigger_id, to_plc(r)); !ok)
+        return verdict_text(r) + ", not published: " + ok.error().message;
+    problem = r.measurement.verdict != measure::Verdict::kOk || r.degraded;
+    return verdict_text(r);
+}
+
+void Daemon::Impl::process(Captured c) {
+    const Job& job = c.job;
+    prepare_results(job.setup);
+    const auto t0 = Clock::now();
+    const pipeline::PartResult r = measure_captured(c);
     const double pipeline_ms = ms_between(t0, Clock::now());
     const auto t1 = Clock::now();
     const std::int64_t t_result = now_ns();
@@ -644,34 +695,16 @@ void Daemon::Impl::process(Captured c) {
     const bool archiving = !c.fault && archive && archive->wants(r, job.sequence);
     if (archiving)
         entry.archived_as = archive->folder(c.rec.part_id, job.sequence, t_result).string();
-    core::Result<void> stored =
+    const core::Result<void> stored =
         log ? log->append(entry) : core::Result<void>(core::make_error(log_error));
     const double store_ms = ms_between(t1, Clock::now());
-
-    // Registers last: a result the PLC can acknowledge is already on disk.
-    std::string outcome;
-    bool problem = true;
     if (!stored)
         spdlog::error("seq {}: results NOT stored: {}; the result is only in this log: {}",
                       job.sequence, stored.error().message, pipeline::to_json(r));
-    if (abandoned == job.sequence) {
-        // The PLC reset this cycle and has moved on: neither a result nor a fault of it may
-        // reach the registers now.
-        outcome = (c.fault ? std::string("NOT_MEASURED (") + c.failure + ")" : verdict_text(r)) +
-                  ", not published: the PLC reset the cycle";
-    } else if (!stored) {
-        server->fault(code(plc::ErrorCode::kNotStored));
-        outcome = "FAULT 206 (result not stored: " + stored.error().message + ")";
-    } else if (c.fault) {
-        server->fault(c.fault);
-        outcome = "FAULT " + std::to_string(c.fault) + " (" +
-                  plc::to_string(static_cast<plc::ErrorCode>(c.fault)) + "): " + c.failure;
-    } else if (auto ok = server->finish(job.trigger.trigger_id, to_plc(r)); !ok) {
-        outcome = verdict_text(r) + ", not published: " + ok.error().message;
-    } else {
-        outcome = verdict_text(r);
-        problem = r.measurement.verdict != measure::Verdict::kOk || r.degraded;
-    }
+
+    // Registers last: a result the PLC can acknowledge is already on disk.
+    bool problem = true;
+    const std::string outcome = publish(c, r, stored, problem);
     const std::int64_t published = now_ns();
     if (archiving) {
         if (auto where = archive->store(c.rec, job.sequence, t_result); !where)
@@ -680,14 +713,8 @@ void Daemon::Impl::process(Captured c) {
     }
     {
         std::lock_guard lock(stats_mutex);
-        PartTiming t;
-        t.sequence = job.sequence;
-        t.last_profile_ns = c.last_profile_ns;
-        t.published_ns = published;
-        t.accel_wait_ms = c.accel_wait_ms;
-        t.pipeline_ms = pipeline_ms;
-        t.store_ms = store_ms;
-        stats.last = t;
+        stats.last = PartTiming{job.sequence,    c.last_profile_ns, published,
+                                c.accel_wait_ms, pipeline_ms,       store_ms};
         ++(c.fault || !stored ? stats.failed : stats.measured);
     }
     std::ostringstream msg;
