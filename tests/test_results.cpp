@@ -239,6 +239,22 @@ TEST(RawArchive, KeepsBadPartsAndEveryNthOkWithinItsQuotaOldestFirst) {
     EXPECT_EQ(stored[4].filename().string(), "000000000005_P_5");  // a safe folder name
 }
 
+TEST(ResultsLog, TheLastSequenceComesFromTheNewestDaysLastWholeLine) {
+    test::TempDir tmp;
+    EXPECT_EQ(results::last_sequence(tmp.path / "none"), 0u) << "no folder: start at 1";
+    std::ofstream(tmp.path / "2026-11-20.jsonl") << "{\"sequence\": 7}\n{\"sequence\": 8}\n";
+    EXPECT_EQ(results::last_sequence(tmp.path), 8u);
+    // A newer day whose last line is torn: its last whole line counts. The line is longer than
+    // one read block, so the search for its start reads back more than once.
+    const std::string pad(100'000, 'x');
+    std::ofstream(tmp.path / "2026-11-21.jsonl")
+        << "{\"sequence\": 9}\n{\"pad\": \"" << pad << "\", \"sequence\": 10}\n{\"seq";
+    EXPECT_EQ(results::last_sequence(tmp.path), 10u);
+    // A newest day without any sequence (empty): the day before it counts.
+    std::ofstream(tmp.path / "2026-11-22.jsonl") << "";
+    EXPECT_EQ(results::last_sequence(tmp.path), 10u);
+}
+
 TEST(ResultsLog, AnUnwritableFolderIsNamed) {
     auto log = results::ResultsLog::open({"/proc/hotgauge-results", true});
     ASSERT_FALSE(log.ok());

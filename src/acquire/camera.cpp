@@ -8,6 +8,8 @@
 #include <chrono>
 #include <cstring>
 
+#include "hotgauge/core/clock.hpp"
+
 namespace hotgauge::acquire {
 namespace {
 
@@ -17,12 +19,6 @@ std::string take(GError*& e) {
     std::string m = e->message ? e->message : "unknown Aravis error";
     g_clear_error(&e);
     return m;
-}
-
-std::int64_t realtime_ns() {
-    return std::chrono::duration_cast<std::chrono::nanoseconds>(
-               std::chrono::system_clock::now().time_since_epoch())
-        .count();
 }
 
 // A multi-part buffer's parts into `f` (parts one after the other in f.data); false when a part
@@ -229,7 +225,7 @@ core::Result<Frame> Camera::next() {
         f.camera_ns = static_cast<std::int64_t>(arv_buffer_get_timestamp(b));
         if (arv_buffer_get_payload_type(b) == ARV_BUFFER_PAYLOAD_TYPE_MULTIPART) {
             if (copy_parts(b, f)) {
-                f.system_ns = realtime_ns();
+                f.system_ns = core::realtime_ns();
                 f.frame_id = arv_buffer_get_frame_id(b);
                 arv_stream_push_buffer(impl_->stream, b);
                 ++stats_.frames;
@@ -239,7 +235,7 @@ core::Result<Frame> Camera::next() {
             arv_stream_push_buffer(impl_->stream, b);
             continue;
         }
-        f.system_ns = realtime_ns();
+        f.system_ns = core::realtime_ns();
         f.frame_id = arv_buffer_get_frame_id(b);
         f.width = arv_buffer_get_image_width(b);
         f.height = arv_buffer_get_image_height(b);

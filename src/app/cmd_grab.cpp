@@ -13,6 +13,7 @@
 #include "hotgauge/acquire/camera.hpp"
 #include "hotgauge/acquire/scan.hpp"
 #include "hotgauge/acquire/session.hpp"
+#include "hotgauge/core/clock.hpp"
 #include "hotgauge/io/recording_io.hpp"
 #include "hotgauge/sim/simulator.hpp"
 #include "hotgauge/vcell/render.hpp"
@@ -75,15 +76,6 @@ core::Result<accel::AccelSourceConfig> parse_accel(const std::string& text) {
     if (auto ok = accel::validate(c); !ok)
         return core::make_error("--accel '" + text + "': " + ok.error().message);
     return c;
-}
-
-std::string now_iso8601() {
-    const std::time_t t = std::time(nullptr);
-    std::tm tm{};
-    gmtime_r(&t, &tm);
-    char buf[32];
-    std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-    return buf;
 }
 
 int run(GrabArgs a) {
@@ -187,7 +179,7 @@ int run(GrabArgs a) {
     core::Recording rec;
     rec.part_id = a.part_id;
     rec.recipe = a.recipe;
-    rec.captured_at = now_iso8601();
+    rec.captured_at = core::iso8601_utc(core::realtime_ns());
     rec.temperature_c = a.temperature_c;
     rec.faces.push_back(std::move(outcome->face));
     auto& scanned = rec.faces[0];

@@ -3,9 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <fstream>
 #include <mutex>
-#include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
 #include <thread>
@@ -14,6 +12,7 @@
 #include "hotgauge/accel/source.hpp"
 #include "hotgauge/cell/axis.hpp"
 #include "hotgauge/cell/journal.hpp"
+#include "hotgauge/core/clock.hpp"
 #include "hotgauge/io/model_io.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/measure/features.hpp"
@@ -36,23 +35,8 @@ constexpr milliseconds kLoopPeriod{100};  // control and worker loops: beat at l
 constexpr double kMarginSlackS = 0.02;
 constexpr milliseconds kMaxCameraWait{5'000};
 
-std::int64_t now_ns() {
-    return std::chrono::duration_cast<std::chrono::nanoseconds>(
-               std::chrono::system_clock::now().time_since_epoch())
-        .count();
-}
-
 double ms_between(Clock::time_point a, Clock::time_point b) {
     return std::chrono::duration<double, std::milli>(b - a).count();
-}
-
-std::string iso8601_utc(std::int64_t t_ns) {
-    const std::time_t t = static_cast<std::time_t>(t_ns / 1'000'000'000);
-    std::tm tm{};
-    gmtime_r(&t, &tm);
-    char buf[32];
-    std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-    return buf;
 }
 
 std::uint16_t code(plc::ErrorCode e) { return static_cast<std::uint16_t>(e); }
@@ -85,26 +69,6 @@ std::vector<std::string> faces_to_scan(const Setup& s, const core::Recipe& recip
     for (const auto& name : s.config.faces)
         if (needed.count(name)) out.push_back(name);
     return out;
-}
-
-// The last sequence number in the results files, so numbering continues across restarts.
-std::uint64_t last_sequence(const fs::path& dir) {
-    std::error_code ec;
-    std::vector<fs::path> days;
-    for (const auto& e : fs::directory_iterator(dir, ec))
-        if (e.path().extension() == ".jsonl") days.push_back(e.path());
-    std::sort(days.begin(), days.end());
-    for (auto it = days.rbegin(); it != days.rend(); ++it) {
-        std::ifstream in(*it);
-        std::string line, last;
-        while (std::getline(in, line))
-            if (!line.empty()) last = line;
-        if (last.empty()) continue;
-        const auto j = nlohmann::json::parse(last, nullptr, false);
-        if (j.is_object() && j.contains("sequence") && j["sequence"].is_number_unsigned())
-            return j["sequence"].get<std::uint64_t>();
-    }
-    return 0;
 }
 
 plc::Verdict to_plc(measure::Verdict v) {
@@ -448,7 +412,7 @@ void Daemon::Impl::await_accel_history(double margin_s) const {
     const auto margin_ns = static_cast<std::int64_t>(margin_s * 1e9);
     const auto deadline = Clock::now() + std::chrono::duration<double>(margin_s + 0.5);
     while (Clock::now() < deadline) {
-        const std::int64_t t = now_ns() - kInFlightNs;
+        const std::int64_t t = core::realtime_ns() - kInFlightNs;
         if (ring->copy_range(t - 100'000'000, t).samples.empty()) return;  // silent
         if (ring->copy_range(t - margin_ns, t).complete()) return;
         std::this_thread::sleep_for(milliseconds(20));
@@ -475,7 +439,7 @@ Captured Daemon::Impl::acquire_part(Job next) {
     prepare_acquisition(job.setup);
     c.rec.part_id = std::to_string(job.trigger.part_id);
     c.rec.recipe = job.recipe->name;
-    c.rec.captured_at = iso8601_utc(now_ns());
+    c.rec.captured_at = core::iso8601_utc(core::realtime_ns());
     // The exposure is set from the temperature at the start; the thermal correction uses the
     // reading taken after the scans, when the pyrometer has surely seen this part and not the
     // one before.
@@ -533,8 +497,8 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
         if (accel && !rec.faces.empty()) {
             const std::int64_t t_free = rec.faces.back().profile_times_ns.back() +
                                         static_cast<std::int64_t>(margin_s * 1e9);
-            if (t_free > now_ns())
-                std::this_thread::sleep_for(std::chrono::nanoseconds(t_free - now_ns()));
+            if (t_free > core::realtime_ns())
+                std::this_thread::sleep_for(std::chrono::nanoseconds(t_free - core::realtime_ns()));
         }
         auto moved = axis->move_to(pos->second);
         // An axis that answers but does not arrive in time is a timeout (204); one that is gone
@@ -683,7 +647,7 @@ void Daemon::Impl::process(Captured c) {
     const pipeline::PartResult r = measure_captured(c);
     const double pipeline_ms = ms_between(t0, Clock::now());
     const auto t1 = Clock::now();
-    const std::int64_t t_result = now_ns();
+    const std::int64_t t_result = core::realtime_ns();
     results::ResultEntry entry;
     entry.time_ns = t_result;
     entry.sequence = job.sequence;
@@ -705,7 +669,7 @@ void Daemon::Impl::process(Captured c) {
     // Registers last: a result the PLC can acknowledge is already on disk.
     bool problem = true;
     const std::string outcome = publish(c, r, stored, problem);
-    const std::int64_t published = now_ns();
+    const std::int64_t published = core::realtime_ns();
     if (archiving) {
         if (auto where = archive->store(c.rec, job.sequence, t_result); !where)
             spdlog::error("seq {}: raw archive: {} (the results line names {})", job.sequence,
@@ -746,7 +710,7 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
     impl->setup = setup;
     impl->sup = std::move(supervisor);
     const DaemonConfig& c = setup->config;
-    impl->stats.next_sequence = last_sequence(c.results.dir) + 1;
+    impl->stats.next_sequence = results::last_sequence(c.results.dir) + 1;
     if (c.accelerometer) {
         // Room for a whole part: every face, the moves and the margins, twice over.
         const double part_s = static_cast<double>(c.faces.size()) *

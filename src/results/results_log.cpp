@@ -10,7 +10,9 @@
 #include <cstring>
 #include <ctime>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string_view>
+#include <vector>
 
 #include "hotgauge/core/log.hpp"
 
@@ -144,6 +146,56 @@ void ResultsLog::close_all() {
     files_.clear();
 }
 
+namespace {
+
+// The end (just past the '\n') of the last line break before offset `end`, reading back a block
+// at a time; 0 when there is none, -1 when the file cannot be read.
+off_t line_end_before(int fd, off_t end) {
+    std::string block(1 << 16, '\0');
+    while (end > 0) {
+        const off_t start = std::max<off_t>(0, end - static_cast<off_t>(block.size()));
+        const auto n = static_cast<std::size_t>(end - start);
+        if (::pread(fd, block.data(), n, start) != static_cast<ssize_t>(n)) return -1;
+        const auto nl = std::string_view(block.data(), n).rfind('\n');
+        if (nl != std::string_view::npos) return start + static_cast<off_t>(nl) + 1;
+        end = start;
+    }
+    return 0;
+}
+
+// The sequence in the last whole line of a JSON-lines file, if it has one.
+std::optional<std::uint64_t> last_sequence_in(const std::filesystem::path& path) {
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return std::nullopt;
+    struct stat st {};
+    std::optional<std::uint64_t> out;
+    const off_t end = ::fstat(fd, &st) == 0 ? line_end_before(fd, st.st_size) : -1;
+    const off_t start = end > 0 ? line_end_before(fd, end - 1) : -1;
+    if (start >= 0) {
+        std::string line(static_cast<std::size_t>(end - 1 - start), '\0');
+        if (::pread(fd, line.data(), line.size(), start) == static_cast<ssize_t>(line.size())) {
+            const auto j = nlohmann::json::parse(line, nullptr, false);
+            if (j.is_object() && j.contains("sequence") && j["sequence"].is_number_unsigned())
+                out = j["sequence"].get<std::uint64_t>();
+        }
+    }
+    ::close(fd);
+    return out;
+}
+
+}  // namespace
+
+std::uint64_t last_sequence(const std::filesystem::path& dir) {
+    std::error_code ec;
+    std::vector<std::filesystem::path> days;
+    for (const auto& e : std::filesystem::directory_iterator(dir, ec))
+        if (e.path().extension() == ".jsonl") days.push_back(e.path());
+    std::sort(days.begin(), days.end());
+    for (auto it = days.rbegin(); it != days.rend(); ++it)
+        if (auto seq = last_sequence_in(*it)) return *seq;
+    return 0;
+}
+
 // Opens a day file for appending. A last line without its line break (the power went during a
 // write) is cut off here, so every line in the file is whole.
 core::Result<ResultsLog::OpenFile*> ResultsLog::file(const std::filesystem::path& path) {
@@ -156,25 +208,12 @@ core::Result<ResultsLog::OpenFile*> ResultsLog::file(const std::filesystem::path
     OpenFile f{fd, {}};
     struct stat st {};
     if (::fstat(fd, &st) == 0 && st.st_size > 0) {
-        // Where the last whole line ends: read back from the end a block at a time (a day's JSON
-        // file grows to tens of megabytes; only its tail is read). Unreadable: left as it is.
+        // Where the last whole line ends (a day's JSON file grows to tens of megabytes; only its
+        // tail is read). Unreadable: left as it is.
         const off_t size = st.st_size;
         std::string block(1 << 16, '\0');
-        off_t keep = 0;
-        for (off_t end = size; end > 0;) {
-            const off_t start = std::max<off_t>(0, end - static_cast<off_t>(block.size()));
-            const auto n = static_cast<std::size_t>(end - start);
-            if (::pread(fd, block.data(), n, start) != static_cast<ssize_t>(n)) {
-                keep = size;
-                break;
-            }
-            const auto nl = std::string_view(block.data(), n).rfind('\n');
-            if (nl != std::string_view::npos) {
-                keep = start + static_cast<off_t>(nl) + 1;
-                break;
-            }
-            end = start;
-        }
+        off_t keep = line_end_before(fd, size);
+        if (keep < 0) keep = size;
         if (keep < size) {
             log().warn("{}: cut a torn last line of {} bytes (a write was interrupted)",
                        path.string(), size - keep);

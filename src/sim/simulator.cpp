@@ -6,6 +6,7 @@
 #include <numbers>
 #include <random>
 
+#include "hotgauge/core/clock.hpp"
 #include "hotgauge/sim/scene.hpp"
 
 namespace hotgauge::sim {
@@ -14,15 +15,6 @@ namespace {
 constexpr double kG = 9.81;  // m/s², as recording-format-v1 defines g_up
 constexpr double kNsPerS = 1e9;
 constexpr double kDeg = std::numbers::pi / 180.0;
-
-std::string iso8601_utc(std::int64_t ns) {
-    const std::time_t secs = static_cast<std::time_t>(ns / 1'000'000'000);
-    std::tm tm{};
-    gmtime_r(&secs, &tm);
-    char buf[32];
-    std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-    return buf;
-}
 
 }  // namespace
 
@@ -71,14 +63,11 @@ core::Result<SimResult> simulate(const core::Recipe& recipe, const CellConfig& c
     RandomStream scan_rng(opt.scan_seed ? *opt.scan_seed : rng());
     const Vibration vib(cell.vibration, 0.0, t_end, scan_rng.engine);
 
-    const std::int64_t t0_ns = opt.t0_ns ? opt.t0_ns
-                                         : std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                               std::chrono::system_clock::now().time_since_epoch())
-                                               .count();
+    const std::int64_t t0_ns = opt.t0_ns ? opt.t0_ns : core::realtime_ns();
     core::Recording& rec = out.recording;
     rec.part_id = opt.part_id;
     rec.recipe = recipe.name;
-    rec.captured_at = opt.captured_at.empty() ? iso8601_utc(t0_ns) : opt.captured_at;
+    rec.captured_at = opt.captured_at.empty() ? core::iso8601_utc(t0_ns) : opt.captured_at;
     rec.temperature_c = opt.temperature_c;
 
     std::vector<RayReturn> returns;

@@ -11,18 +11,13 @@
 #include <utility>
 
 #include "hotgauge/accel/udp.hpp"
+#include "hotgauge/core/clock.hpp"
 #include "hotgauge/sim/scene.hpp"
 #include "hotgauge/sim/vibration.hpp"
 #include "log.hpp"
 
 namespace hotgauge::vcell {
 namespace {
-
-std::int64_t now_ns() {
-    return std::chrono::duration_cast<std::chrono::nanoseconds>(
-               std::chrono::system_clock::now().time_since_epoch())
-        .count();
-}
 
 constexpr double kServeHorizonS = 7 * 24 * 3600.0;  // press blows are drawn for a week
 
@@ -239,11 +234,12 @@ void VirtualCell::Impl::run_accel() {
     sim::RandomStream rng(config.part.seed ^ 0xacce1);
     const sim::FaceConfig* at = face.load();
     sim::AccelHead head(a, at->T_world_camera.linear() * at->R_camera_accel, rng);
-    std::int64_t next_ns = (now_ns() / period_ns + 1) * period_ns;  // samples on a fixed grid
+    std::int64_t next_ns =
+        (core::realtime_ns() / period_ns + 1) * period_ns;  // samples on a fixed grid
     std::vector<float> batch;
     while (!stop) {
         std::this_thread::sleep_for(std::chrono::duration<double>(config.accel_datagram_s));
-        const std::int64_t now = now_ns();
+        const std::int64_t now = core::realtime_ns();
         if (const sim::FaceConfig* f = face.load(); f != at) {  // the axis moved the head
             at = f;
             head.set_R_world_accel(at->T_world_camera.linear() * at->R_camera_accel);
@@ -325,7 +321,7 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
     auto tri = sensor_triangulation(c.cell.sensor);
     if (!tri) return tri.error();
     impl->triangulation.emplace(std::move(*tri));
-    impl->t0_ns = now_ns();
+    impl->t0_ns = core::realtime_ns();
 
     if (!c.accel_to.empty()) {
         auto sender = accel::UdpAccelSender::open(c.accel_to, c.accel_sensor_id);

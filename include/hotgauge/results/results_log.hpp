@@ -73,6 +73,11 @@ class ResultsLog {
 std::string csv_header(const pipeline::PartResult& result);
 std::string csv_row(const ResultEntry& entry);
 std::string jsonl_line(const ResultEntry& entry);
+// The sequence number of the newest part in the results folder (the last line of the newest
+// day's JSON file that has one; only file tails are read), 0 when there is none: numbering goes
+// on from there after a restart.
+std::uint64_t last_sequence(const std::filesystem::path& dir);
+
 // "2026-11-22T07:15:03.123+01:00" (local time with its offset) and "2026-11-22" (local date).
 std::string local_iso8601(std::int64_t time_ns);
 std::string local_date(std::int64_t time_ns);
