@@ -7,6 +7,7 @@
 
 #include "hotgauge/accel/udp.hpp"
 #include "hotgauge/cell/plc_sections.hpp"
+#include "hotgauge/io/checksum.hpp"
 #include "hotgauge/io/yaml_reader.hpp"
 
 namespace hotgauge::cell {
@@ -19,13 +20,10 @@ using io::YamlReader;
 std::string file_hash(const fs::path& file) {
     std::ifstream in(file, std::ios::binary);
     const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    std::uint64_t h = 1469598103934665603ull;
-    for (unsigned char c : bytes) {
-        h ^= c;
-        h *= 1099511628211ull;
-    }
     char out[17];
-    std::snprintf(out, sizeof out, "%016llx", static_cast<unsigned long long>(h));
+    std::snprintf(out, sizeof out, "%016llx",
+                  static_cast<unsigned long long>(io::fnv1a64(
+                      reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size())));
     return out;
 }
 

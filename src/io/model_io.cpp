@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "file_bytes.hpp"
+#include "hotgauge/io/checksum.hpp"
 
 namespace hotgauge::io {
 namespace {
@@ -29,15 +30,6 @@ using match::Model;
 constexpr std::array<unsigned char, 8> kMagic = {'H', 'G', 'P', 'P', 'F', 0, '\r', '\n'};
 constexpr std::size_t kHeaderBytes = 8 + 4 + 8;  // magic, version, body size
 constexpr std::size_t kChecksumBytes = 8;
-
-std::uint64_t fnv1a64(const unsigned char* data, std::size_t n) {
-    std::uint64_t h = 0xcbf29ce484222325ull;
-    for (std::size_t i = 0; i < n; ++i) {
-        h ^= data[i];
-        h *= 0x100000001b3ull;
-    }
-    return h;
-}
 
 class Writer {
   public:
