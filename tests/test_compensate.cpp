@@ -300,3 +300,49 @@ TEST(CompensatedMeasurement, AllFeaturesUnderDefaultVibration) {
         std::printf("\n");
     }
 }
+
+// Why profiles within min_margin_s of a record end are degraded: the zero-phase high-pass needs
+// the record on both sides of a profile. Records cut `cut` s after the last profile; RMS of
+// |u_est − u_true| by the profile's distance from the record end (printed: docs/compensation.md).
+TEST(CompensateFace, TailErrorIsWhyTheMarginRuleExists) {
+    const double edges[] = {0.0, 0.1, 0.2, 0.3, 0.5, 1.0, 100.0};
+    constexpr int kBins = 6;
+    auto table = [&](double cut) {
+        std::vector<double> s2(kBins, 0.0), n(kBins, 0.0);
+        for (std::uint64_t seed = 1; seed <= 6; ++seed) {
+            const auto s = simulate(env().cell, seed);
+            for (std::size_t j = 0; j < s.recording.faces.size(); ++j) {
+                core::FaceScan f = s.recording.faces[j];
+                const auto t_end = f.profile_times_ns.back() + static_cast<std::int64_t>(cut * 1e9);
+                std::size_t keep = 0;
+                while (keep < f.accel_times_ns.size() && f.accel_times_ns[keep] <= t_end) ++keep;
+                f.accel_times_ns.resize(keep);
+                f.accel_mps2.resize(keep * 3);
+                const auto fc = compensate::compensate_face(f, {});
+                for (std::size_t k = 0; k < fc.u_mm.size(); ++k) {
+                    const double d = static_cast<double>(t_end - f.profile_times_ns[k]) * 1e-9;
+                    int b = 0;
+                    while (d >= edges[b + 1]) ++b;
+                    s2[b] += (1000.0 * (fc.u_mm[k] - s.truth.faces[j].u_mm[k])).squaredNorm();
+                    n[b] += 1;
+                }
+            }
+        }
+        std::printf("record ends %.2f s after the last profile; RMS |error| by distance:", cut);
+        std::vector<double> rms(kBins, NAN);
+        for (int b = 0; b < kBins; ++b) {
+            if (n[b] == 0) continue;
+            rms[b] = std::sqrt(s2[b] / n[b]);
+            std::printf(" %.1f-%.1f s: %.1f um;", edges[b], std::min(edges[b + 1], 9.9), rms[b]);
+        }
+        std::printf("\n");
+        return rms;
+    };
+    const auto short_record = table(0.05);
+    const auto at_margin = table(CompensationConfig{}.min_margin_s);
+    const auto long_record = table(1.0);
+    EXPECT_GT(short_record[0], 5.0 * long_record[5]);  // next to the end: far off
+    EXPECT_GT(short_record[1], 3.0 * long_record[5]);
+    EXPECT_LT(at_margin[4], 1.5 * long_record[5]);  // at the margin: about as good as inside
+    EXPECT_LT(long_record[5], 8.0);
+}
