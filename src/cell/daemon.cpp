@@ -32,7 +32,9 @@ using Clock = std::chrono::steady_clock;
 using std::chrono::milliseconds;
 
 constexpr milliseconds kLoopPeriod{100};  // control and worker loops: beat at least this often
-constexpr double kMarginSlackS = 0.02;
+// Recorded past the margins the compensation needs, so that the sample grid's phase never leaves
+// a face a fraction of a period short: four periods of a 400 Hz accelerometer.
+constexpr double kMarginSlackS = 0.01;
 constexpr milliseconds kMaxCameraWait{5'000};
 
 double ms_between(Clock::time_point a, Clock::time_point b) {
@@ -448,8 +450,6 @@ Captured Daemon::Impl::acquire_part(Job next) {
         if (const plc::PyrometerReading t = pyrometer->latest(); t.valid())
             exposure_temperature = t.temperature_c;
     }
-    // The accelerometer is recorded a little beyond the margins the compensation needs, so that
-    // the sample grid's phase never leaves a face a fraction of a period short.
     const double margin_s = s.config.accel_margin_s + kMarginSlackS;
     // A camera lost recently is retried after a backoff: a short one is worth waiting for, as
     // the part is here now; a long one fails the part at once with the reason.
