@@ -305,10 +305,11 @@ Support support(const Surface& surface, const std::vector<Eigen::Vector3f>& pts,
     const auto margin = static_cast<float>(margin_mm), band = static_cast<float>(band_mm);
     for (const auto& p : pts) {
         const Eigen::Vector3f q = T_pw * p;
-        const Closest c = surface.closest(q, sc);
+        // The region test first: the closest point is the costly part, and most scan points
+        // (the plate, the other faces' surroundings) lie outside the part's region.
         if (!surface.inside_region(q, sc, margin)) continue;
         ++s.near;
-        s.inliers += c.distance < band;
+        s.inliers += surface.closest(q, sc).distance < band;
     }
     return s;
 }

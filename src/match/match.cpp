@@ -8,7 +8,9 @@
 #include <chrono>
 #include <cmath>
 #include <numbers>
+#include <optional>
 
+#include "hotgauge/core/parallel.hpp"
 #include "internal.hpp"
 
 namespace hotgauge::match {
@@ -57,7 +59,6 @@ std::vector<Candidate> vote(const Model& model, const detail::Samples& scene, in
     // A + α_m − α_s (never wraps), and cells b and b + A are folded afterwards. Each entry's cell
     // A + α_m is precomputed, so the inner loop is one load, one add, one increment.
     const std::size_t row = 2 * static_cast<std::size_t>(A);
-    std::vector<std::uint32_t> acc(model.refs.size() * row);
     std::vector<std::uint32_t> cell(model.entries.size());
     for (std::size_t e = 0; e < cell.size(); ++e) {
         const int am = std::clamp(
@@ -66,13 +67,24 @@ std::vector<Candidate> vote(const Model& model, const detail::Samples& scene, in
         cell[e] = static_cast<std::uint32_t>(model.entries[e].ref * row +
                                              static_cast<std::size_t>(A + am));
     }
-    std::vector<std::uint32_t> folded(model.refs.size() * static_cast<std::size_t>(A));
     std::vector<Eigen::Matrix<float, 3, 4>> Tm(model.refs.size());
     for (std::size_t r = 0; r < model.refs.size(); ++r)
         Tm[r] = to_ref_frame(model.points[model.refs[r]], model.normals[model.refs[r]]);
-    std::vector<Candidate> out;
-    for (std::size_t s = 0; s < n; s += stride) {
-        std::fill(acc.begin(), acc.end(), 0);
+    // Scene reference points vote independently: they are spread over the cores, each worker
+    // with its own accumulator, and each reference's candidates are kept apart and concatenated
+    // in reference order, so the result is the same as from one thread.
+    const std::size_t n_refs = (n + stride - 1) / stride;
+    std::vector<std::vector<Candidate>> found(n_refs);
+    struct Scratch {
+        std::vector<std::uint32_t> acc, folded;
+    };
+    std::vector<Scratch> scratch(core::worker_count());
+    core::parallel_for(n_refs, 0, [&](std::size_t ref, unsigned worker) {
+        auto& acc = scratch[worker].acc;
+        auto& folded = scratch[worker].folded;
+        acc.assign(model.refs.size() * row, 0);
+        folded.resize(model.refs.size() * static_cast<std::size_t>(A));
+        const std::size_t s = ref * stride;
         const Eigen::Vector3f& ps = scene.points[s];
         const Eigen::Vector3f& ns = scene.normals[s];
         const auto Ts = to_ref_frame(ps, ns);
@@ -107,9 +119,12 @@ std::vector<Candidate> vote(const Model& model, const detail::Samples& scene, in
                 continue;
             const auto r = c / static_cast<std::size_t>(A);
             const float alpha = static_cast<float>(c % static_cast<std::size_t>(A)) * bin;
-            out.push_back({from_ref_frames(Ts, Tm[r], alpha), static_cast<double>(folded[c])});
+            found[ref].push_back(
+                {from_ref_frames(Ts, Tm[r], alpha), static_cast<double>(folded[c])});
         }
-    }
+    });
+    std::vector<Candidate> out;
+    for (auto& f : found) out.insert(out.end(), f.begin(), f.end());
     return out;
 }
 
@@ -194,10 +209,21 @@ MatchResult match(const Model& model, const core::Recording& rec, const FaceDisp
     const auto t0 = Clock::now();
     const double sampling =
         cfg.scene_sampling_mm > 0 ? cfg.scene_sampling_mm : model.config.sampling_mm;
-    detail::Samples scene = detail::voting_samples(rec, u, sampling, cfg.normal_radius_mm);
-    detail::Surface surface(model);
+    // The voting samples, the dense ICP grid and the model surface are independent: built
+    // concurrently (the samples take the longest; the other worker does the rest).
+    detail::Samples scene;
+    std::vector<Eigen::Vector3f> dense;
+    std::optional<detail::Surface> surface_built;
+    core::parallel_for(3, 0, [&](std::size_t job, unsigned) {
+        if (job == 0)
+            scene = detail::voting_samples(rec, u, sampling, cfg.normal_radius_mm);
+        else if (job == 1)
+            dense = detail::grid_points(rec, u, cfg.icp_grid_mm);
+        else
+            surface_built.emplace(model);
+    });
+    const detail::Surface& surface = *surface_built;
     const double part_extent = 2.0 * surface.half_size();
-    std::vector<Eigen::Vector3f> dense = detail::grid_points(rec, u, cfg.icp_grid_mm);
     if (cfg.remove_background_plane) {
         // Larger than any plane of the part: for an axisymmetric part its largest diameter.
         const double min_extent =

@@ -9,12 +9,11 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <limits>
 #include <numbers>
-#include <thread>
 
+#include "hotgauge/core/parallel.hpp"
 #include "hotgauge/measure/fit.hpp"
 
 namespace hotgauge::measure {
@@ -1087,26 +1086,6 @@ PartMeasurement unmeasured(const core::Recipe& recipe, const core::Recording& re
     return out;
 }
 
-namespace {
-
-// fn(0..n-1) on up to `threads` threads (0: one per core); items are taken in order.
-template <class Fn>
-void parallel_for(std::size_t n, int threads, const Fn& fn) {
-    const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
-    const std::size_t k =
-        std::min<std::size_t>(n, threads > 0 ? static_cast<std::size_t>(threads) : cores);
-    std::atomic<std::size_t> next{0};
-    auto work = [&] {
-        for (std::size_t i = next++; i < n; i = next++) fn(i);
-    };
-    std::vector<std::thread> pool;
-    for (std::size_t t = 1; t < k; ++t) pool.emplace_back(work);
-    work();
-    for (auto& t : pool) t.join();
-}
-
-}  // namespace
-
 PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& rec,
                              const Eigen::Isometry3d& T_world_part, const FaceDisplacements& u,
                              const MeasureConfig& config) {
@@ -1135,7 +1114,7 @@ PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& 
     const double gmax = ex.g * (1.0 + ex.slack);
     // Faces, then features, are independent of each other: spread over the cores.
     std::vector<FaceFrame> prepared(rec.faces.size());
-    parallel_for(rec.faces.size(), config.threads, [&](std::size_t i) {
+    core::parallel_for(rec.faces.size(), config.threads, [&](std::size_t i, unsigned) {
         const auto& face = rec.faces[i];
         auto it = u.find(face.name);
         prepared[i] =
@@ -1147,7 +1126,7 @@ PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& 
     for (std::size_t i = 0; i < rec.faces.size(); ++i)
         frames.emplace(rec.faces[i].name, std::move(prepared[i]));
     std::vector<FeatureResult> measured(recipe.features.size());
-    parallel_for(recipe.features.size(), config.threads, [&](std::size_t i) {
+    core::parallel_for(recipe.features.size(), config.threads, [&](std::size_t i, unsigned) {
         FeatureMeasurer m(recipe, frames, ex, config);
         measured[i] = skeleton(recipe.features[i]);
         m.measure(recipe.features[i], measured[i]);
