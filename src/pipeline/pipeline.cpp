@@ -1,5 +1,6 @@
 #include "hotgauge/pipeline/pipeline.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -20,6 +21,36 @@ nlohmann::json opt(const std::optional<double>& v) {
 // Seconds between two clock readings, without int64 overflow on corrupt files (summary only).
 double span_s(std::int64_t later, std::int64_t earlier) {
     return (static_cast<double>(later) - static_cast<double>(earlier)) * 1e-9;
+}
+
+// How the value was found (docs/measure-output.md): the method, the faces used, and per end of
+// a height (or a diameter's edge) its estimator.
+void add_method(const measure::FeatureResult& f, nlohmann::json& fj) {
+    using nlohmann::json;
+    if (f.method.empty()) return;
+    fj["method"] = f.method;
+    json budget = json::object();
+    for (const auto& [name, u] : f.u_budget) budget[name] = u;
+    fj["u_budget_mm"] = budget;
+    std::vector<std::string> used;
+    json ends = json::array();
+    for (const auto& e : f.ends) {
+        for (const auto& face : e.faces)
+            if (std::find(used.begin(), used.end(), face) == used.end()) used.push_back(face);
+        json ej = {{"level", e.level},
+                   {"estimator", e.estimator},
+                   {"faces", e.faces},
+                   {"u_mm", e.u_mm},
+                   {"n_points", e.n_points}};
+        ej[f.kind == core::FeatureKind::kDiameter ? "radius_mm" : "z_mm"] = e.value_mm;
+        ends.push_back(ej);
+    }
+    fj["faces_used"] = used;
+    if (f.kind == core::FeatureKind::kDiameter) {
+        if (!ends.empty()) fj["edge"] = ends.front();
+    } else {
+        fj["ends"] = ends;
+    }
 }
 
 }  // namespace
@@ -199,6 +230,7 @@ std::string to_json(const PartResult& r) {
         fj["sector_spread_mm"] = opt(f.sector_spread_mm);
         fj["n_sectors"] = f.n_sectors;
         if (f.kind == core::FeatureKind::kDiameter && measured) fj["arc_deg"] = f.arc_deg;
+        add_method(f, fj);
         j["features"].push_back(fj);
     }
     j["warnings"] = r.warnings;

@@ -5,6 +5,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "hotgauge/core/part.hpp"
@@ -40,6 +41,20 @@ struct MeasureConfig {
 enum class Verdict { kOk, kNok, kNotMeasured };
 const char* to_string(Verdict v);
 
+// How one end of a height, or the edge of a diameter, was found (docs/measurement.md):
+//   "plane"            the level's flat face, fitted (paper §4.3.1)
+//   "convex corner"    both faces of the edge seen: the fitted face meets the fitted wall
+//   "concave corner"   the wall standing on the support plate: the fitted plate meets the wall
+//   "silhouette edge"  one face seen: brackets of neighbouring rays across the edge
+struct EdgeEstimate {
+    std::string level;      // recipe level
+    std::string estimator;  // one of the four above
+    std::vector<std::string> faces;
+    double value_mm = 0;  // heights: z of the end (hot part frame); diameters: edge radius
+    double u_mm = 0;      // standard uncertainty of value_mm from its fit
+    std::int64_t n_points = 0;
+};
+
 struct FeatureResult {
     std::string name;
     core::FeatureKind kind = core::FeatureKind::kDiameter;
@@ -50,13 +65,16 @@ struct FeatureResult {
     std::optional<double> hot_mm;   // as measured at the part temperature
     std::optional<double> cold_mm;  // hot / (1 + α(T)·(T − 20)); needs the temperature
     double nominal_mm = 0, tol_lower_mm = 0, tol_upper_mm = 0;
-    std::optional<double> deviation_mm;      // cold − nominal
-    double fit_rms_mm = 0;                   // RMS residual of the fit(s) behind the value
-    std::int64_t n_points = 0;               // points behind the value (edge points, plane points)
-    double u_mm = 0;                         // standard uncertainty from the fit(s), hot
+    std::optional<double> deviation_mm;  // cold − nominal
+    double fit_rms_mm = 0;               // RMS residual of the fit(s) behind the value
+    std::int64_t n_points = 0;           // points behind the value (edge points, plane points)
+    double u_mm = 0;  // standard uncertainty of hot_mm: the budget's terms in quadrature
+    std::vector<std::pair<std::string, double>> u_budget;  // term name, standard uncertainty
     std::optional<double> sector_spread_mm;  // std of the sector values (multiple sampling)
     int n_sectors = 0;
     double arc_deg = 0;  // diameters: angular coverage of the edge points
+    std::string method;  // "edge circle", "planes", "plane and edge", "edges" (empty: none)
+    std::vector<EdgeEstimate> ends;  // heights: from, to; diameters: the edge
 };
 
 struct PartMeasurement {

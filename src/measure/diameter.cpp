@@ -1,0 +1,273 @@
+// Diameters (docs/measurement.md, "Edges and circles", paper §4.3.2): the level's plane, a coarse
+// edge from grid normals, brackets of neighbouring rays across the edge, a circle through the
+// brackets; on a partial arc the radius about the part axis.
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "edges.hpp"
+#include "feature_kinds.hpp"
+
+namespace hotgauge::measure::detail {
+namespace {
+
+using Pair2d = std::pair<Eigen::Vector2d, Eigen::Vector2d>;
+
+// The level's plane, its normal towards the sensor, and a 2D frame in it for circle fits.
+struct EdgePlane {
+    PlaneFit plane;
+    double thr = 0;              // on-plane threshold
+    double profile_scatter = 0;  // profiles' offsets from the plane beyond noise
+    Eigen::Vector3d e1, e2;
+    Eigen::Vector2d to2d(const Eigen::Vector3d& p) const {
+        const Eigen::Vector3d d = p - plane.point;
+        return {d.dot(e1), d.dot(e2)};
+    }
+};
+
+// On-plane samples near the expected edge radius (the bracket seeds, per face) and, among them,
+// the coarse edge points: a grid normal leaving the plane normal (paper §4.3.2) or a neighbour
+// beyond the plane.
+void coarse_edge(const Context& ctx, const core::FeatureSpec& f,
+                 const std::vector<const FaceFrame*>& frames, const EdgePlane& ep, double R_e,
+                 double win, std::vector<Eigen::Vector2d>& coarse,
+                 std::vector<std::vector<std::int64_t>>& seeds) {
+    const double cos_edge = std::cos(ctx.c.normal_edge_deg / kRadToDeg);
+    const double band = ctx.ex.tol(ctx.c.plane_band_mm, ctx.level_z(f.edge_at));
+    const PlaneFit& plane = ep.plane;
+    seeds.assign(frames.size(), {});
+    for (std::size_t fi = 0; fi < frames.size(); ++fi) {
+        const FaceFrame& fr = *frames[fi];
+        fr.for_z(plane.point.z() - band, plane.point.z() + band, [&](const FaceFrame::Near& s) {
+            if (std::abs(s.r - R_e) > win) return;
+            const Eigen::Vector3d p = s.p.cast<double>();
+            if (std::abs(plane.distance(p)) > ep.thr) return;
+            seeds[fi].push_back(s.q);
+            const std::int64_t k = s.q / fr.w, i = s.q % fr.w;
+            bool edge = false;
+            for (const auto& nb : kNeighbours)
+                if (!fr.valid(k + nb[0], i + nb[1]) ||
+                    plane.distance(fr.point(k + nb[0], i + nb[1])) < -ep.thr)
+                    edge = true;
+            if (!edge && !flat_around(fr, plane, ep.thr, k, i)) {
+                const auto nrm = grid_normal(fr, k, i);
+                edge = nrm && std::abs(nrm->dot(plane.normal)) < cos_edge;
+            }
+            if (edge) coarse.push_back(ep.to2d(p));
+        });
+    }
+}
+
+// Brackets across the edge within `window` of the circle (cc, rc), as 2D pairs (A, B).
+std::vector<Pair2d> edge_brackets(const Context& ctx, const std::vector<const FaceFrame*>& frames,
+                                  const EdgePlane& ep,
+                                  const std::vector<std::vector<std::int64_t>>& seeds,
+                                  bool plane_inside, const Eigen::Vector2d& cc, double rc,
+                                  double window) {
+    std::vector<Pair2d> out;
+    for (std::size_t fi = 0; fi < frames.size(); ++fi) {
+        const FaceFrame& fr = *frames[fi];
+        auto on = [&](std::int64_t k, std::int64_t i) {
+            return std::abs(ep.plane.distance(fr.point(k, i))) <= ep.thr;
+        };
+        auto cross = [&](std::int64_t k, std::int64_t i) {
+            return cross_plane(ep.plane, fr.ray_origin(k, i), fr.ray_dir(i));
+        };
+        auto keep = [&](const Eigen::Vector3d& A, const Eigen::Vector3d& B) {
+            const double ra = (ep.to2d(A) - cc).norm(), rb = (ep.to2d(B) - cc).norm();
+            const double rm = (ep.to2d(0.5 * (A + B)) - cc).norm();
+            return (plane_inside ? ra < rb : ra > rb) && std::abs(rm - rc) <= window;
+        };
+        for (const auto& b :
+             bracket_edges(fr, seeds[fi], ep.thr, ctx.c.max_pair_gap_mm, on, cross, keep))
+            out.emplace_back(ep.to2d(b.A), ep.to2d(b.B));
+    }
+    return out;
+}
+
+// Two passes of midpoint circles: a wide window around the coarse circle, then a narrow one
+// around the first fine circle. Returns the inlier brackets and the last midpoint fit.
+struct FineEdge {
+    std::vector<Pair2d> brackets;  // inliers of the midpoint fit
+    std::vector<Eigen::Vector2d> midpoints;
+    CircleFit fit;
+};
+std::optional<FineEdge> fine_edge(const Context& ctx, const core::FeatureSpec& f,
+                                  const std::vector<const FaceFrame*>& frames, const EdgePlane& ep,
+                                  const std::vector<std::vector<std::int64_t>>& seeds,
+                                  bool plane_inside, const CircleFit& coarse, std::string& why) {
+    Eigen::Vector2d cc = coarse.center;
+    double rc = coarse.radius, window = ctx.c.fine_window_mm;
+    FineEdge out;
+    for (int pass = 0; pass < 2; ++pass) {
+        const auto br = edge_brackets(ctx, frames, ep, seeds, plane_inside, cc, rc, window);
+        std::vector<Eigen::Vector2d> mids;
+        for (const auto& [A, B] : br) mids.push_back(0.5 * (A + B));
+        if (static_cast<int>(mids.size()) < ctx.c.min_edge_points) {
+            why = "edge of '" + f.section + "': only " + std::to_string(mids.size()) +
+                  " bracketed edge samples";
+            return std::nullopt;
+        }
+        auto fit = fit_circle_robust(mids, {3.0, 0.02, 10});
+        if (!fit) {
+            why = "edge circle: " + fit.error().message;
+            return std::nullopt;
+        }
+        out = {};
+        for (std::size_t q = 0; q < br.size(); ++q)
+            if (fit->inlier[q]) {
+                out.brackets.push_back(br[q]);
+                out.midpoints.push_back(mids[q]);
+            }
+        out.fit = fit->fit;
+        cc = fit->fit.center;
+        rc = fit->fit.radius;
+        window = ctx.c.refine_window_mm;
+    }
+    return out;
+}
+
+// Arc coverage in 10° bins and the sector diameters (multiple sampling, paper §4.3).
+void coverage(const Context& ctx, const FineEdge& fe, FeatureResult& r,
+              std::vector<double>& sector_d) {
+    std::vector<int> bins(36, 0);
+    const int ns = std::max(1, ctx.c.sectors);
+    std::vector<double> ssum(ns, 0.0);
+    std::vector<int> scnt(ns, 0);
+    for (const auto& m : fe.midpoints) {
+        const Eigen::Vector2d d = m - fe.fit.center;
+        const double turn = (std::atan2(d.y(), d.x()) + std::numbers::pi) / (2 * std::numbers::pi);
+        bins[std::min(35, static_cast<int>(turn * 36))]++;
+        const int s = std::min(ns - 1, static_cast<int>(turn * ns));
+        ssum[s] += d.norm();
+        scnt[s]++;
+    }
+    int covered = 0;
+    for (int b : bins) covered += b > 0;
+    r.arc_deg = 10.0 * covered;
+    const int min_in_sector = std::max(5, static_cast<int>(fe.fit.n_points / (4 * ns)));
+    for (int s = 0; s < ns; ++s)
+        if (scnt[s] >= min_in_sector) sector_d.push_back(2.0 * ssum[s] / scnt[s]);
+}
+
+// On a partial arc centre and radius trade off: the radius all brackets agree on about the part
+// axis (which the pose gives), refused when a free fit disagrees by more than its noise allows.
+bool partial_arc_radius(const Context& ctx, const core::FeatureSpec& f, const EdgePlane& ep,
+                        const FineEdge& fe, const BracketCircle& bc, FeatureResult& r,
+                        double& radius, double& u_radius) {
+    const PlaneFit& pl = ep.plane;
+    const double z_axis =
+        pl.point.z() +
+        (pl.normal.x() * pl.point.x() + pl.normal.y() * pl.point.y()) / pl.normal.z();
+    const Eigen::Vector2d c_axis = ep.to2d(Eigen::Vector3d(0.0, 0.0, z_axis));
+    std::vector<Interval> radial;
+    for (const auto& [A, B] : fe.brackets) {
+        const double ra = (A - c_axis).norm(), rb = (B - c_axis).norm();
+        radial.push_back({std::min(ra, rb), std::max(ra, rb)});
+    }
+    const IntervalEstimate e = stab(radial);
+    // The free fit's disagreement carries the pose's axis error: it enters u in full, and beyond
+    // what the free fit's own noise explains the value is not trusted at all.
+    const double disagreement = std::abs(e.value - bc.radius);
+    const double limit = std::max(ctx.c.max_partial_arc_disagreement_mm, 3.0 * fe.fit.u_radius_mm);
+    if (disagreement > limit) {
+        r.reason = "edge of '" + f.section + "' on " + std::to_string(static_cast<int>(r.arc_deg)) +
+                   "° of arc: centred on the part axis its radius differs by " +
+                   std::to_string(disagreement) + " mm from a free fit: pose off or edge distorted";
+        return false;
+    }
+    radius = e.value;
+    u_radius = std::hypot(e.u, disagreement);
+    return true;
+}
+
+// The level plane with its normal towards the sensor, or why not.
+std::optional<EdgePlane> edge_plane(const Context& ctx, const core::FeatureSpec& f,
+                                    const std::vector<const FaceFrame*>& frames, double R,
+                                    bool& plane_inside, std::string& why) {
+    const auto ann = ctx.annulus(f.edge_at, R, frames, why);
+    if (!ann) return std::nullopt;
+    plane_inside = ann->hi == R;  // the plane lies at r < R (outer edge)
+    PlaneResult pl = ctx.level_plane(f.edge_at, *ann, frames);
+    if (!pl.error.empty()) {
+        why = pl.error;
+        return std::nullopt;
+    }
+    EdgePlane ep;
+    ep.plane = pl.fit;
+    if (ep.plane.normal.dot(frames.front()->view) > 0) ep.plane.normal = -ep.plane.normal;
+    ep.thr = surface_threshold(ep.plane.rms_mm, ctx.c);
+    ep.profile_scatter = pl.profile_scatter_mm;
+    ep.e1 = ep.plane.normal.unitOrthogonal();
+    ep.e2 = ep.plane.normal.cross(ep.e1);
+    return ep;
+}
+
+}  // namespace
+
+void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
+                      const std::vector<const FaceFrame*>& frames, FeatureResult& r) {
+    const double R = 0.5 * ctx.recipe.section(f.section)->diameter_mm;
+    bool plane_inside = false;
+    const auto ep = edge_plane(ctx, f, frames, R, plane_inside, r.reason);
+    if (!ep) return;
+    const double R_e = ctx.ex.z(R), win = ctx.ex.tol(ctx.c.edge_window_mm, R);
+    std::vector<Eigen::Vector2d> coarse;
+    std::vector<std::vector<std::int64_t>> seeds;
+    coarse_edge(ctx, f, frames, *ep, R_e, win, coarse, seeds);
+    if (static_cast<int>(coarse.size()) < ctx.c.min_edge_points) {
+        r.reason = "edge of '" + f.section + "' at '" + f.edge_at + "': only " +
+                   std::to_string(coarse.size()) + " edge points near the expected radius";
+        return;
+    }
+    auto coarse_fit = fit_circle_robust(coarse, {3.0, 0.1, 10});
+    if (!coarse_fit) {
+        r.reason = "coarse edge circle: " + coarse_fit.error().message;
+        return;
+    }
+    const auto fe = fine_edge(ctx, f, frames, *ep, seeds, plane_inside, coarse_fit->fit, r.reason);
+    if (!fe) return;
+    std::vector<double> sector_d;
+    coverage(ctx, *fe, r, sector_d);
+    if (r.arc_deg < ctx.c.min_arc_deg) {
+        r.reason = "edge seen on only " + std::to_string(static_cast<int>(r.arc_deg)) + "° of arc";
+        return;
+    }
+    // The midpoint fit is unbiased only where the edge is dithered across the sampling grid; the
+    // bracket fit keeps the circle inside every bracket and so removes what is left.
+    const BracketCircle bc = fit_circle_brackets(fe->brackets, fe->fit.center, fe->fit.radius);
+    // The circle's centre must lie on the part axis (the pose put it there) and its radius in the
+    // window: otherwise these are not the edge's points.
+    const Eigen::Vector3d centre =
+        ep->plane.point + bc.center.x() * ep->e1 + bc.center.y() * ep->e2;
+    const double off_axis = centre.head<2>().norm();
+    if (off_axis > ctx.c.max_axis_offset_mm || std::abs(bc.radius - R_e) > win) {
+        r.reason = "edge circle of '" + f.section + "' is " + std::to_string(off_axis) +
+                   " mm off the part axis, radius " + std::to_string(bc.radius) +
+                   " mm: wrong pose or wrong part";
+        return;
+    }
+    double radius = bc.radius;
+    // Conservative: the midpoint fit's statistical figure plus how far the bracket constraints
+    // had to move it (the sampling grid's share).
+    double u_radius = std::hypot(fe->fit.u_radius_mm, bc.radius - fe->fit.radius);
+    if (r.arc_deg < ctx.c.free_centre_min_arc_deg &&
+        !partial_arc_radius(ctx, f, *ep, *fe, bc, r, radius, u_radius))
+        return;
+    r.hot_mm = 2.0 * radius;
+    r.u_budget = {{"fit", 2.0 * fe->fit.u_radius_mm},
+                  {"sampling", 2.0 * std::abs(bc.radius - fe->fit.radius)},
+                  {"compensation", ep->profile_scatter}};
+    if (r.arc_deg < ctx.c.free_centre_min_arc_deg)
+        r.u_budget.push_back({"partial arc", 2.0 * u_radius});
+    r.u_mm = 0;
+    for (const auto& [name, u] : r.u_budget) r.u_mm = std::hypot(r.u_mm, u);
+    r.fit_rms_mm = fe->fit.rms_mm;
+    r.n_points = fe->fit.n_points;
+    r.method = "edge circle";
+    r.ends.push_back({f.edge_at, "silhouette edge", f.faces, radius, u_radius, r.n_points});
+    r.n_sectors = static_cast<int>(sector_d.size());
+    if (sector_d.size() >= 2) r.sector_spread_mm = sample_std(sector_d);
+}
+
+}  // namespace hotgauge::measure::detail

@@ -1,0 +1,23 @@
+#pragma once
+// The feature kinds of a recipe, each measured on the prepared faces (docs/measurement.md):
+// diameters from edge circles, heights from planes or from edges along the axis. Internal to the
+// measure module; `measure_part` (features.cpp) dispatches to these.
+#include <vector>
+
+#include "frame.hpp"
+#include "hotgauge/core/part.hpp"
+#include "hotgauge/measure/features.hpp"
+#include "surfaces.hpp"
+
+namespace hotgauge::measure::detail {
+
+// Diameter of the circular edge where `f.section`'s wall meets the level `f.edge_at`.
+void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
+                      const std::vector<const FaceFrame*>& frames, FeatureResult& r);
+
+// Height between two levels, each end by the best estimator its faces allow (planes where the
+// level's face is seen, corners and silhouette edges where it is not).
+void measure_height(const Context& ctx, const core::FeatureSpec& f,
+                    const std::vector<const FaceFrame*>& frames, FeatureResult& r);
+
+}  // namespace hotgauge::measure::detail

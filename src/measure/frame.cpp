@@ -1,0 +1,167 @@
+// Face preparation: the part-frame samples near the part, bucketed by z, and the per-column ray
+// model x = a_i + b_i·z (docs/measurement.md, "Preparation" and "Corrupt samples").
+#include "frame.hpp"
+
+namespace hotgauge::measure::detail {
+namespace {
+
+// Per-column sums of the camera-frame samples, for the least-squares ray line x = a + b·z of
+// each column. A sensor computes (x, z) from (column, row) through its calibration, so every
+// sample of a column lies on that column's ray whatever it hit: one pass, no outliers to reject.
+struct ColumnSums {
+    double s = 0, sz = 0, sx = 0, szz = 0, szx = 0;
+    void add(double x, double z) {
+        s += 1;
+        sz += z;
+        sx += x;
+        szz += z * z;
+        szx += z * x;
+    }
+};
+
+void fit_columns(const std::vector<ColumnSums>& sums, std::vector<double>& a,
+                 std::vector<double>& b) {
+    const auto w = static_cast<std::int64_t>(sums.size());
+    a.assign(w, kNaN);
+    b.assign(w, kNaN);
+    std::vector<double> mean_x(w, kNaN), mean_z(w, kNaN);
+    for (std::int64_t i = 0; i < w; ++i) {
+        const ColumnSums& c = sums[i];
+        if (c.s < 1) continue;
+        mean_x[i] = c.sx / c.s;
+        mean_z[i] = c.sz / c.s;
+        const double var_z = c.szz / c.s - mean_z[i] * mean_z[i];
+        if (c.s < 10 || var_z < 1.0) continue;  // too little depth spread to see the slope
+        b[i] = (c.szx / c.s - mean_x[i] * mean_z[i]) / var_z;
+        a[i] = mean_x[i] - b[i] * mean_z[i];
+    }
+    // Columns without a determined slope: interpolate the slope between determined neighbours
+    // (the fan's slope varies smoothly across the line), keep their own mean point when any.
+    std::vector<std::int64_t> known;
+    for (std::int64_t i = 0; i < w; ++i)
+        if (!std::isnan(b[i])) known.push_back(i);
+    if (known.empty()) {
+        for (std::int64_t i = 0; i < w; ++i) {  // no depth anywhere: rays through the origin
+            b[i] = std::isnan(mean_z[i]) || mean_z[i] == 0 ? 0.0 : mean_x[i] / mean_z[i];
+            a[i] = 0.0;
+        }
+        return;
+    }
+    std::size_t j = 0;
+    for (std::int64_t i = 0; i < w; ++i) {
+        if (!std::isnan(b[i])) continue;
+        while (j + 1 < known.size() && known[j + 1] < i) ++j;
+        const std::int64_t l = known[j], r = (j + 1 < known.size()) ? known[j + 1] : known[j];
+        double bi, ai;
+        if (i <= known.front()) {
+            bi = b[known.front()];
+            ai = a[known.front()];
+        } else if (i >= known.back()) {
+            bi = b[known.back()];
+            ai = a[known.back()];
+        } else {
+            const double t = static_cast<double>(i - l) / static_cast<double>(r - l);
+            bi = b[l] + t * (b[r] - b[l]);
+            ai = a[l] + t * (a[r] - a[l]);
+        }
+        b[i] = bi;
+        a[i] = std::isnan(mean_x[i]) ? ai : mean_x[i] - bi * mean_z[i];
+    }
+}
+
+// A corrupt sample off its column's ray (which a calibrated sensor cannot produce) would tilt
+// that column's line: columns with a sample farther than kRayToleranceMm from their line are
+// fitted again from the samples near a robust (median) line.
+void refit_off_ray_columns(const core::FaceScan& f, std::vector<ColumnSums>& sums,
+                           std::vector<double>& a, std::vector<double>& b) {
+    constexpr double kRayToleranceMm = 0.5;
+    const std::int64_t n = f.n_profiles(), w = f.width;
+    std::vector<std::uint8_t> bad(static_cast<std::size_t>(w), 0);
+    bool any = false;
+    for (std::int64_t k = 0; k < n; ++k)
+        for (std::int64_t i = 0; i < w; ++i) {
+            const double x = f.x(k, i), z = f.z(k, i);
+            if (!std::isfinite(x) || !std::isfinite(z) || std::isnan(b[i])) continue;
+            if (std::abs(x - a[i] - b[i] * z) > kRayToleranceMm) {
+                bad[i] = 1;
+                any = true;
+            }
+        }
+    if (!any) return;
+    for (std::int64_t i = 0; i < w; ++i) {
+        if (!bad[i]) continue;
+        std::vector<double> xs, zs, ratio, icpt;
+        for (std::int64_t k = 0; k < n; ++k) {
+            const double x = f.x(k, i), z = f.z(k, i);
+            if (std::isfinite(x) && std::isfinite(z) && z != 0.0) {
+                xs.push_back(x);
+                zs.push_back(z);
+                ratio.push_back(x / z);
+            }
+        }
+        sums[i] = ColumnSums{};
+        if (xs.empty()) continue;
+        std::nth_element(ratio.begin(), ratio.begin() + ratio.size() / 2, ratio.end());
+        const double b0 = ratio[ratio.size() / 2];
+        for (std::size_t j = 0; j < xs.size(); ++j) icpt.push_back(xs[j] - b0 * zs[j]);
+        std::nth_element(icpt.begin(), icpt.begin() + icpt.size() / 2, icpt.end());
+        const double a0 = icpt[icpt.size() / 2];
+        for (std::size_t j = 0; j < xs.size(); ++j)
+            if (std::abs(xs[j] - a0 - b0 * zs[j]) <= kRayToleranceMm) sums[i].add(xs[j], zs[j]);
+    }
+    fit_columns(sums, a, b);
+}
+
+// Counting sort of the near-part samples by z bucket.
+void bucket_by_z(FaceFrame& fr, std::vector<FaceFrame::Near> near, double z_lo, double z_hi) {
+    const auto nb = static_cast<std::int64_t>((z_hi - z_lo) / FaceFrame::kBucketMm) + 1;
+    fr.z0 = z_lo;
+    auto index = [&](float z) {
+        return std::clamp<std::int64_t>(
+            static_cast<std::int64_t>((z - z_lo) / FaceFrame::kBucketMm), 0, nb - 1);
+    };
+    fr.bucket.assign(static_cast<std::size_t>(nb + 1), 0);
+    for (const auto& s : near) ++fr.bucket[index(s.p.z()) + 1];
+    for (std::int64_t b = 0; b < nb; ++b) fr.bucket[b + 1] += fr.bucket[b];
+    fr.near.resize(near.size());
+    std::vector<std::int64_t> fill(fr.bucket.begin(), fr.bucket.end() - 1);
+    for (const auto& s : near) fr.near[fill[index(s.p.z())]++] = s;
+}
+
+}  // namespace
+
+FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_world,
+                     const std::vector<Eigen::Vector3d>* u, double r_max, double z_lo,
+                     double z_hi) {
+    FaceFrame fr;
+    fr.scan = &f;
+    fr.n = f.n_profiles();
+    fr.w = f.width;
+    fr.M = T_part_world.linear() * f.T_world_camera.linear();
+    fr.view = fr.M.col(2);
+    fr.origin.resize(fr.n);
+    std::vector<FaceFrame::Near> near;
+    std::vector<ColumnSums> columns(static_cast<std::size_t>(fr.w));
+    const double r2_max = r_max * r_max;
+    for (std::int64_t k = 0; k < fr.n; ++k) {
+        Eigen::Vector3d t =
+            f.T_world_camera.translation() + f.profile_positions_mm[k] * f.scan_direction;
+        if (u && static_cast<std::int64_t>(u->size()) == fr.n) t += (*u)[k];
+        fr.origin[k] = T_part_world * t;
+        for (std::int64_t i = 0; i < fr.w; ++i) {
+            const float x = f.x(k, i), z = f.z(k, i);
+            if (!std::isfinite(x) || !std::isfinite(z)) continue;
+            columns[i].add(x, z);
+            const Eigen::Vector3d p = fr.M * Eigen::Vector3d(x, 0.0, z) + fr.origin[k];
+            const double r2 = p.x() * p.x() + p.y() * p.y();
+            if (!(r2 <= r2_max && p.z() >= z_lo && p.z() <= z_hi)) continue;  // NaN-safe
+            near.push_back({k * fr.w + i, p.cast<float>(), static_cast<float>(std::sqrt(r2))});
+        }
+    }
+    fit_columns(columns, fr.col_a, fr.col_b);
+    refit_off_ray_columns(f, columns, fr.col_a, fr.col_b);
+    bucket_by_z(fr, std::move(near), z_lo, z_hi);
+    return fr;
+}
+
+}  // namespace hotgauge::measure::detail

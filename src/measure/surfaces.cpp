@@ -1,0 +1,171 @@
+// Level annuli of the recipe's solid and their fitted planes (docs/measurement.md, "Planes").
+#include "surfaces.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "hotgauge/measure/fit.hpp"
+
+namespace hotgauge::measure::detail {
+
+double surface_threshold(double rms, const MeasureConfig& c) {
+    return std::max(c.on_surface_k_sigma * rms, c.on_surface_min_mm);
+}
+
+std::vector<Annulus> annuli_at(const core::AxisymmetricSolid& s, double z) {
+    std::vector<Annulus> out;
+    std::vector<core::AxisymmetricSolid::Segment> segs;
+    for (const auto& seg : s.boundary())
+        if (!seg.cylinder && seg.value == z) segs.push_back(seg);
+    std::sort(segs.begin(), segs.end(), [](auto& x, auto& y) { return x.lo < y.lo; });
+    for (const auto& seg : segs) {
+        const int facing = s.inside(0.5 * (seg.lo + seg.hi), z - 1e-6) ? +1 : -1;
+        if (!out.empty() && out.back().hi == seg.lo && out.back().facing == facing)
+            out.back().hi = seg.hi;
+        else
+            out.push_back({seg.lo, seg.hi, facing});
+    }
+    return out;
+}
+
+namespace {
+
+// How far whole profiles sit off the fitted plane beyond what the range noise explains: the
+// residual of the vibration compensation along the plane's normal (docs/measurement.md,
+// "Uncertainty"). From the mean residual of each profile with enough points on the plane.
+double profile_scatter(const std::vector<Eigen::Vector3d>& points,
+                       const std::vector<std::int64_t>& key, const PlaneFit& plane) {
+    constexpr std::size_t kMinPointsPerProfile = 20;
+    std::vector<std::size_t> order(points.size());
+    for (std::size_t q = 0; q < order.size(); ++q) order[q] = q;
+    std::sort(order.begin(), order.end(), [&](auto a, auto b) { return key[a] < key[b]; });
+    double s_mean2 = 0, s_noise2 = 0;
+    std::size_t profiles = 0;
+    for (std::size_t a = 0; a < order.size();) {
+        std::size_t b = a;
+        double s = 0, s2 = 0;
+        for (; b < order.size() && key[order[b]] == key[order[a]]; ++b) {
+            const double d = plane.distance(points[order[b]]);
+            s += d;
+            s2 += d * d;
+        }
+        const auto n = static_cast<double>(b - a);
+        if (b - a >= kMinPointsPerProfile) {
+            const double mean = s / n, var = std::max(0.0, s2 / n - mean * mean);
+            s_mean2 += mean * mean;
+            s_noise2 += var / (n - 1.0);
+            ++profiles;
+        }
+        a = b;
+    }
+    if (profiles < 10) return 0.0;
+    return std::sqrt(std::max(0.0, (s_mean2 - s_noise2) / static_cast<double>(profiles)));
+}
+
+}  // namespace
+
+PlaneResult fit_level_plane(const std::vector<const FaceFrame*>& frames, double z_e, double band,
+                            double r_lo, double r_hi, const MeasureConfig& c,
+                            const std::string& what) {
+    PlaneResult out;
+    std::vector<Eigen::Vector3d> cand;
+    std::vector<std::int64_t> key;  // face index << 32 | profile
+    for (std::size_t fi = 0; fi < frames.size(); ++fi)
+        frames[fi]->for_z(z_e - band, z_e + band, [&](const FaceFrame::Near& s) {
+            if (std::abs(s.p.z() - z_e) <= band && s.r >= r_lo && s.r <= r_hi) {
+                cand.push_back(s.p.cast<double>());
+                key.push_back(static_cast<std::int64_t>(fi) << 32 | s.q / frames[fi]->w);
+            }
+        });
+    if (static_cast<int>(cand.size()) < c.min_plane_points) {
+        out.error =
+            what + ": only " + std::to_string(cand.size()) + " points where the plane should be";
+        return out;
+    }
+    // A plane is known to a fraction of a micrometre from tens of thousands of points: beyond
+    // that, an even subsample keeps the fit's cost bounded.
+    constexpr std::size_t kMaxPlanePoints = 20000;
+    if (cand.size() > kMaxPlanePoints) {
+        const std::size_t keep_every = (cand.size() + kMaxPlanePoints - 1) / kMaxPlanePoints;
+        std::size_t m = 0;
+        for (std::size_t q = 0; q < cand.size(); q += keep_every, ++m) {
+            cand[m] = cand[q];
+            key[m] = key[q];
+        }
+        cand.resize(m);
+        key.resize(m);
+    }
+    // RANSAC scores hypotheses on an even subsample (a few thousand points decide a plane as
+    // well as a few hundred thousand); all candidates are then classified against its plane.
+    constexpr std::size_t kRansacPoints = 4000;
+    const double ransac_thr = std::max(c.on_surface_min_mm, 0.1);
+    std::vector<Eigen::Vector3d> sub;
+    const std::size_t stride = std::max<std::size_t>(1, cand.size() / kRansacPoints);
+    for (std::size_t q = 0; q < cand.size(); q += stride) sub.push_back(cand[q]);
+    auto seed = ransac_plane(sub, {ransac_thr, 100, 7});
+    if (!seed) {
+        out.error = what + ": " + seed.error().message;
+        return out;
+    }
+    std::vector<Eigen::Vector3d> in;
+    std::vector<std::int64_t> in_key;
+    for (std::size_t q = 0; q < cand.size(); ++q)
+        if (std::abs(seed->fit.distance(cand[q])) <= ransac_thr) {
+            in.push_back(cand[q]);
+            in_key.push_back(key[q]);
+        }
+    auto fit = fit_plane_robust(in, {c.on_surface_k_sigma, 0.0, 10});
+    if (!fit) {
+        out.error = what + ": " + fit.error().message;
+        return out;
+    }
+    std::vector<std::int64_t> used_key;
+    for (std::size_t q = 0; q < in.size(); ++q)
+        if (fit->inlier[q]) {
+            out.points.push_back(in[q]);
+            used_key.push_back(in_key[q]);
+        }
+    out.fit = fit->fit;
+    out.profile_scatter_mm = profile_scatter(out.points, used_key, out.fit);
+    return out;
+}
+
+bool Context::faces_sensors(const Annulus& a, const std::vector<const FaceFrame*>& frames) {
+    for (const auto* fr : frames)
+        if (a.facing * fr->view.z() >= 0) return false;
+    return true;
+}
+
+std::optional<Annulus> Context::annulus(const std::string& level, double R,
+                                        const std::vector<const FaceFrame*>& frames,
+                                        std::string& why) const {
+    for (const auto& a : annuli_at(solid, level_z(level))) {
+        if (a.lo != R && a.hi != R) continue;
+        if (!faces_sensors(a, frames)) {
+            why = "the face at level '" + level + "' does not face the sensor of " +
+                  frames.front()->scan->name;
+            continue;
+        }
+        return a;
+    }
+    if (why.empty()) why = "no flat face at level '" + level + "' next to the edge";
+    return std::nullopt;
+}
+
+PlaneResult Context::level_plane(const std::string& level, const Annulus& a,
+                                 const std::vector<const FaceFrame*>& frames) const {
+    const double z = level_z(level);
+    const double m = c.support_margin_mm;
+    PlaneResult pl =
+        fit_level_plane(frames, ex.z(z), ex.tol(c.plane_band_mm, z), ex.z(a.lo) + ex.tol(m, a.lo),
+                        ex.z(a.hi) - ex.tol(m, a.hi), c, "plane at level '" + level + "'");
+    if (pl.error.empty()) {
+        const double tilt = std::acos(std::min(1.0, std::abs(pl.fit.normal.z()))) * kRadToDeg;
+        if (tilt > c.max_plane_tilt_deg)
+            pl.error = "plane at level '" + level + "' is tilted " + std::to_string(tilt) +
+                       "° from the part axis: wrong pose or wrong part";
+    }
+    return pl;
+}
+
+}  // namespace hotgauge::measure::detail
