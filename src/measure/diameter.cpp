@@ -150,22 +150,29 @@ void coverage(const Context& ctx, const FineEdge& fe, FeatureResult& r,
         if (scnt[s] >= min_in_sector) sector_d.push_back(2.0 * ssum[s] / scnt[s]);
 }
 
+// The radius (nearly) all brackets agree on about a centre (interval stabbing): robust to the few
+// brackets that lie wholly inside the material (a dropout next to the edge taken for the region
+// beyond it), which would drag a least-squares circle inwards; u is the agreed width / √12.
+IntervalEstimate agreed_radius(const std::vector<Pair2d>& brackets, const Eigen::Vector2d& c) {
+    std::vector<Interval> radial;
+    for (const auto& [A, B] : brackets) {
+        const double ra = (A - c).norm(), rb = (B - c).norm();
+        radial.push_back({std::min(ra, rb), std::max(ra, rb)});
+    }
+    return stab(radial);
+}
+
 // On a partial arc centre and radius trade off: the radius all brackets agree on about the part
 // axis (which the pose gives), refused when a free fit disagrees by more than its noise allows.
 bool partial_arc_radius(const Context& ctx, const core::FeatureSpec& f, const EdgePlane& ep,
                         const FineEdge& fe, const BracketCircle& bc, FeatureResult& r,
-                        double& radius, double& u_radius) {
+                        double& radius, double& u_arc) {
     const PlaneFit& pl = ep.plane;
     const double z_axis =
         pl.point.z() +
         (pl.normal.x() * pl.point.x() + pl.normal.y() * pl.point.y()) / pl.normal.z();
-    const Eigen::Vector2d c_axis = ep.to2d(Eigen::Vector3d(0.0, 0.0, z_axis));
-    std::vector<Interval> radial;
-    for (const auto& [A, B] : fe.brackets) {
-        const double ra = (A - c_axis).norm(), rb = (B - c_axis).norm();
-        radial.push_back({std::min(ra, rb), std::max(ra, rb)});
-    }
-    const IntervalEstimate e = stab(radial);
+    const IntervalEstimate e =
+        agreed_radius(fe.brackets, ep.to2d(Eigen::Vector3d(0.0, 0.0, z_axis)));
     // The free fit's disagreement carries the pose's axis error: it enters u in full, and beyond
     // what the free fit's own noise explains the value is not trusted at all.
     const double disagreement = std::abs(e.value - bc.radius);
@@ -177,7 +184,7 @@ bool partial_arc_radius(const Context& ctx, const core::FeatureSpec& f, const Ed
         return false;
     }
     radius = e.value;
-    u_radius = std::hypot(e.u, disagreement);
+    u_arc = disagreement;
     return true;
 }
 
@@ -247,27 +254,25 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
                    " mm: wrong pose or wrong part";
         return;
     }
-    double radius = bc.radius;
-    // Conservative: the midpoint fit's statistical figure plus how far the bracket constraints
-    // had to move it (the sampling grid's share).
-    double u_radius = std::hypot(fe->fit.u_radius_mm, bc.radius - fe->fit.radius);
+    // Full circle: the radius the brackets agree on about the bracket circle's centre. Partial
+    // arc: centre and radius trade off, so about the part axis (partial_arc_radius).
+    const IntervalEstimate agreed = agreed_radius(fe->brackets, bc.center);
+    double radius = agreed.value, u_arc = 0;
     if (r.arc_deg < ctx.c.free_centre_min_arc_deg &&
-        !partial_arc_radius(ctx, f, *ep, *fe, bc, r, radius, u_radius))
+        !partial_arc_radius(ctx, f, *ep, *fe, bc, r, radius, u_arc))
         return;
     r.hot_mm = 2.0 * radius;
     r.u_budget = {{"fit", 2.0 * fe->fit.u_radius_mm},
-                  {"sampling", 2.0 * std::abs(bc.radius - fe->fit.radius)},
+                  {"sampling", 2.0 * agreed.u},
                   {"compensation", ep->profile_scatter}};
-    if (r.arc_deg < ctx.c.free_centre_min_arc_deg)
-        r.u_budget.push_back({"partial arc", 2.0 * u_radius});
-    r.u_mm = 0;
-    for (const auto& [name, u] : r.u_budget) r.u_mm = std::hypot(r.u_mm, u);
+    if (u_arc > 0) r.u_budget.push_back({"partial arc", 2.0 * u_arc});
     r.fit_rms_mm = fe->fit.rms_mm;
     r.n_points = fe->fit.n_points;
     r.method = "edge circle";
-    r.ends.push_back({f.edge_at, "silhouette edge", f.faces, radius, u_radius, r.n_points});
     r.n_sectors = static_cast<int>(sector_d.size());
     if (sector_d.size() >= 2) r.sector_spread_mm = sample_std(sector_d);
+    add_sector_term(r);
+    r.ends.push_back({f.edge_at, "silhouette edge", f.faces, radius, 0.5 * r.u_mm, r.n_points});
 }
 
 }  // namespace hotgauge::measure::detail

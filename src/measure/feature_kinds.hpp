@@ -20,4 +20,8 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
 void measure_height(const Context& ctx, const core::FeatureSpec& f,
                     const std::vector<const FaceFrame*>& frames, FeatureResult& r);
 
+// Closes a feature's uncertainty budget: the sector spread's standard error joins the terms
+// (docs/measurement.md, "Uncertainty"), and u_mm becomes their quadrature sum.
+void add_sector_term(FeatureResult& r);
+
 }  // namespace hotgauge::measure::detail

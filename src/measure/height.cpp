@@ -26,6 +26,7 @@ struct LevelEnd {
     Eigen::Vector3d ref = Eigen::Vector3d::Zero();  // the end's point (on the plane at the wall)
     std::vector<double> angles;                     // silhouette: azimuth of each bracket
     std::vector<Interval> intervals;                // silhouette: each bracket's z interval
+    double u_pose = 0;                              // share of est.u_mm from the pose's axis
 };
 
 // Standard uncertainty of a plane's height at `p` from its points: offset and tilt (lever arm).
@@ -158,7 +159,11 @@ std::optional<LevelEnd> support_end(const Context& ctx, const std::string& level
     }
     LevelEnd e;
     e.ref = {0.0, 0.0, z_end};
-    e.est = {level, "concave corner", {}, z_end, plane_u_at(pl, e.ref), pl.fit.n_points};
+    // The lean of the axis against the plate comes from the pose: its error moves the rim by R·δ.
+    e.u_pose = R * ctx.c.pose_axis_u_deg / kRadToDeg;
+    e.est = {
+        level,          "concave corner", {}, z_end, std::hypot(plane_u_at(pl, e.ref), e.u_pose),
+        pl.fit.n_points};
     return e;
 }
 
@@ -279,7 +284,11 @@ void height_edges(const Context& ctx, const core::FeatureSpec& f,
     r.reason.clear();
     r.hot_mm = height_between(e[0], e[1]);
     r.n_points = e[0].est.n_points + e[1].est.n_points;
-    r.u_mm = std::hypot(e[0].est.u_mm, e[1].est.u_mm);
+    const double u_pose = std::hypot(e[0].u_pose, e[1].u_pose);
+    r.u_budget = {
+        {"fit", std::sqrt(std::max(0.0, std::pow(e[0].est.u_mm, 2) + std::pow(e[1].est.u_mm, 2) -
+                                            u_pose * u_pose))},
+        {"pose", u_pose}};
     const int planes = (e[0].plane ? 1 : 0) + (e[1].plane ? 1 : 0);
     r.method = planes == 2 ? "planes" : planes == 1 ? "plane and edge" : "edges";
     for (const auto& end : e) {
@@ -287,6 +296,7 @@ void height_edges(const Context& ctx, const core::FeatureSpec& f,
         if (end.plane) r.fit_rms_mm = std::max(r.fit_rms_mm, end.plane->rms_mm);
     }
     if (planes == 0) edge_sectors(ctx, e, r);
+    add_sector_term(r);
 }
 
 // Sectors for two planes: the height from the points of each angular sector of both.
@@ -342,8 +352,8 @@ void height_planes(const Context& ctx, const core::FeatureSpec& f,
     r.hot_mm = a_ref ? std::abs(A.distance(B.point)) : std::abs(B.distance(A.point));
     r.fit_rms_mm = std::max(A.rms_mm, B.rms_mm);
     r.n_points = A.n_points + B.n_points;
-    r.u_mm = std::sqrt(A.rms_mm * A.rms_mm / static_cast<double>(A.n_points) +
-                       B.rms_mm * B.rms_mm / static_cast<double>(B.n_points));
+    r.u_budget = {{"fit", std::sqrt(A.rms_mm * A.rms_mm / static_cast<double>(A.n_points) +
+                                    B.rms_mm * B.rms_mm / static_cast<double>(B.n_points))}};
     r.method = "planes";
     std::vector<std::string> faces;
     for (const auto* fr : frames) faces.push_back(fr->scan->name);
@@ -351,9 +361,20 @@ void height_planes(const Context& ctx, const core::FeatureSpec& f,
         r.ends.push_back({levels[j], "plane", faces, pl[j].fit.point.z(),
                           plane_u_at(pl[j], pl[j].fit.point), pl[j].fit.n_points});
     plane_sectors(ctx, pl, r);
+    add_sector_term(r);
 }
 
 }  // namespace
+
+// What varies around the part (form, compensation residual, a lean the fit does not see) shows
+// in the spread of the sector values: their standard error enters the budget, and u_mm is the
+// budget's terms in quadrature.
+void add_sector_term(FeatureResult& r) {
+    if (r.sector_spread_mm && r.n_sectors >= 2)
+        r.u_budget.push_back({"sectors", *r.sector_spread_mm / std::sqrt(r.n_sectors)});
+    r.u_mm = 0;
+    for (const auto& [name, u] : r.u_budget) r.u_mm = std::hypot(r.u_mm, u);
+}
 
 void measure_height(const Context& ctx, const core::FeatureSpec& f,
                     const std::vector<const FaceFrame*>& frames, FeatureResult& r) {

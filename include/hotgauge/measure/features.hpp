@@ -36,6 +36,9 @@ struct MeasureConfig {
     int sectors = 8;                  // multiple sampling (paper §4.3): sector fits
     double max_axis_offset_mm = 1.0;  // an edge circle centred this far off the part axis, or
     double max_plane_tilt_deg = 3.0;  // a plane this tilted from it: wrong pose or wrong part
+    // Standard uncertainty of the part axis's direction from the pose (match: worst 0.016° over
+    // 200 random placements, docs/matching.md): enters heights that rely on the axis's lean.
+    double pose_axis_u_deg = 0.01;
 };
 
 enum class Verdict { kOk, kNok, kNotMeasured };
