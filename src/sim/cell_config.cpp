@@ -45,10 +45,11 @@ core::Result<CellConfig> read_cell_config(const std::filesystem::path& file) {
 
         if (const YAML::Node s = root["sensor"]) {
             const std::string w = "sensor";
-            y.expect_map(s, w,
-                         {"width", "pitch_mm", "standoff_mm", "min_range_mm", "max_range_mm",
-                          "camera_center_mm", "range_noise_mm", "dropout_fraction",
-                          "spike_fraction", "spike_range_mm", "max_incidence_deg", "line_rate_hz"});
+            y.expect_map(
+                s, w,
+                {"width", "pitch_mm", "standoff_mm", "min_range_mm", "max_range_mm",
+                 "camera_center_mm", "range_noise_mm", "dropout_fraction", "spike_fraction",
+                 "spike_range_mm", "max_incidence_deg", "line_rate_hz", "imager_occlusion"});
             auto& o = c.sensor;
             if (s["width"]) o.width = static_cast<int>(y.integer(s["width"], w + ".width"));
             if (o.width < 2) y.fail(s["width"], w + ".width: must be >= 2");
@@ -62,6 +63,8 @@ core::Result<CellConfig> read_cell_config(const std::filesystem::path& file) {
                 const auto v = y.numbers(s["camera_center_mm"], w + ".camera_center_mm", 3);
                 o.camera_center_mm = Eigen::Vector3d(v[0], v[1], v[2]);
             }
+            if (s["imager_occlusion"])
+                o.imager_occlusion = y.boolean(s["imager_occlusion"], w + ".imager_occlusion");
             o.range_noise_mm = y.number_or(s, w, "range_noise_mm", o.range_noise_mm);
             if (o.range_noise_mm < 0)
                 y.fail(s["range_noise_mm"], w + ".range_noise_mm: must be >= 0");

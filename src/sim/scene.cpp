@@ -136,13 +136,15 @@ void Scene::cast_profile(const FaceConfig& fc, const Eigen::Vector3d& origin, Ra
         if (range_z < s.min_range_mm || range_z > s.max_range_mm) continue;
         const double cos_incidence = std::abs(hit->normal.dot(d));
         if (cos_incidence < cos_max_incidence) continue;
-        // Triangulation needs the imager to see the lit point.
-        const Eigen::Vector3d to_imager = imager - p;
-        const double dist = to_imager.norm();
-        if (hit->normal.dot(to_imager) * hit->normal.dot(-d) <= 0.0) continue;
-        if (cast(solid_, T_part_world_, false, 0.0, p + 1e-6 * to_imager / dist, to_imager / dist,
-                 dist))
-            continue;
+        // Triangulation needs the imager to see the lit point (unless the cell leaves it out).
+        if (s.imager_occlusion) {
+            const Eigen::Vector3d to_imager = imager - p;
+            const double dist = to_imager.norm();
+            if (hit->normal.dot(to_imager) * hit->normal.dot(-d) <= 0.0) continue;
+            if (cast(solid_, T_part_world_, false, 0.0, p + 1e-6 * to_imager / dist,
+                     to_imager / dist, dist))
+                continue;
+        }
         if (effects.dropouts && rng.uniform() < s.dropout_fraction) continue;
         double along = effects.range_noise ? s.range_noise_mm * rng.normal() : 0.0;
         bool spike = false;

@@ -32,6 +32,9 @@ struct SensorConfig {
     double spike_range_mm = 5.0;      // spikes are uniform in ±this along the ray
     double max_incidence_deg = 80.0;  // no return at grazing incidence
     double line_rate_hz = 1000.0;     // profiles per second
+    // A return needs the imager (camera_center_mm) to see the lit point: shadows at steps.
+    // false: a point wherever the laser ray hits first (the incidence limit still applies).
+    bool imager_occlusion = true;
 };
 
 struct FaceConfig {
