@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """hotgauge measure against the independent oracle (tests/oracle/render.cpp).
 
-    oracle_test.py RENDER HOTGAUGE --recipe hub-a.yaml [--geometry ours|down15]
+    oracle_test.py RENDER HOTGAUGE --recipe hub-a.yaml [--geometry ours|down15|down30]
         [--noise SIGMA_MM] [--dropout P] [--phases N] [--validator PATH] [--seed S]
 
 For each sub-sample phase j/N the oracle renders hub-a (random but seeded offset within
@@ -11,7 +11,7 @@ exact dimension (truth.json). Checks:
   1. every feature measured, |hot - true| <= 5 µm noiseless, <= 15 µm noisy;
   2. noiseless: |mean error over the phases| <= 2 µm per feature (edge bias);
   3. when the JSON has per-feature estimator details (`ends`, `edge`): the error of every end
-     and edge grouped by estimator, |mean| <= 2 µm per estimator on noiseless renders;
+     and edge grouped by estimator, |mean| <= 2 µm per estimator (edges: noisy renders too);
   4. noisy: fraction of features with |error| <= 2 u >= 95 %, median u of diameters <= 10 µm;
   5. the first render passes the independent format checker (validate-recording);
   and, on the first noiseless render, the oracle itself: every rendered point lies on the
@@ -138,7 +138,7 @@ def main():
     ap.add_argument("render")
     ap.add_argument("hotgauge")
     ap.add_argument("--recipe", required=True)
-    ap.add_argument("--geometry", default="ours", choices=["ours", "down15"])
+    ap.add_argument("--geometry", default="ours", choices=["ours", "down15", "down30"])
     ap.add_argument("--noise", type=float, default=0.0)
     ap.add_argument("--dropout", type=float, default=0.0)
     ap.add_argument("--phases", type=int, default=16)
@@ -293,7 +293,9 @@ def main():
             v = np.array(v)
             print(f"  {est:16s} n {v.size:4d}  mean {v.mean() * 1000:+7.2f}  "
                   f"std {v.std() * 1000:6.2f}  max|e| {np.abs(v).max() * 1000:6.2f}")
-            if not noisy and abs(v.mean()) > 0.002:
+            # Edges are unbiased with and without noise (issue 15: σ 0–0.1 mm); a plane's mean
+            # over 16 noisy phases scatters by its own noise (a narrow bore step: ~0.8 µm).
+            if (not noisy or est != "plane") and abs(v.mean()) > 0.002:
                 fail(f"estimator '{est}': mean error {v.mean() * 1000:+.2f} µm exceeds ±2 µm")
         print("  by estimator and level / section (information):")
         for (est, where), v in sorted(per_end.items()):

@@ -5,7 +5,7 @@
 // Written from the recording format document (recording-format-v1.md), the part document
 // (hub-a.md) and the recipe alone: it shares no code, header or library with src/.
 //
-//   hotgauge_oracle_render --recipe hub-a.yaml --out DIR [--geometry ours|down15]
+//   hotgauge_oracle_render --recipe hub-a.yaml --out DIR [--geometry ours|downDEG]
 //       [--temperature C] [--x MM] [--y MM] [--yaw-deg D] [--phase F] [--noise SIGMA_MM]
 //       [--dropout P] [--seed S] [--part-id ID] [--threads N] [--segments N]
 //
@@ -87,7 +87,7 @@ struct Options {
 
 [[noreturn]] void usage(const std::string& why) {
     std::cerr << "hotgauge_oracle_render: " << why << "\n"
-              << "usage: hotgauge_oracle_render --recipe FILE --out DIR [--geometry ours|down15]\n"
+              << "usage: hotgauge_oracle_render --recipe FILE --out DIR [--geometry ours|downDEG]\n"
                  "  [--temperature C] [--x MM] [--y MM] [--yaw-deg D] [--phase F]\n"
                  "  [--noise SIGMA_MM] [--dropout P] [--seed S] [--part-id ID] [--threads N]\n"
                  "  [--segments N]\n";
@@ -149,7 +149,11 @@ Options parse(int argc, char** argv) {
         }
     }
     if (o.recipe.empty() || o.out.empty()) usage("--recipe and --out are required");
-    if (o.geometry != "ours" && o.geometry != "down15") usage("--geometry: ours or down15");
+    if (o.geometry != "ours" &&
+        !(o.geometry.rfind("down", 0) == 0 && o.geometry.size() > 4 &&
+          o.geometry.find_first_not_of("0123456789", 4) == std::string::npos &&
+          std::stoi(o.geometry.substr(4)) <= 45))
+        usage("--geometry: ours or downDEG (side sensors DEG° down, at most 45)");
     if (!(o.phase >= 0.0 && o.phase < 1.0)) usage("--phase must be in [0, 1)");
     if (o.noise < 0.0 || o.dropout < 0.0 || o.dropout >= 1.0) usage("bad --noise / --dropout");
     if (o.segments < 16) usage("--segments must be >= 16");
@@ -373,9 +377,9 @@ Matrix3d columns(const Vector3d& x, const Vector3d& y, const Vector3d& z) {
 }
 
 // The camera poses. `ours`: config/cell.yaml's camera_to_world (rotation, x and z translation
-// copied; the y translation is the start of this render's scan window). `down15`: top and
-// bottom as `ours`; the side sensors look 15° down with a vertical laser plane, the optical
-// axis through the hot flange rim at mid-thickness (nominal part axis at the world origin)
+// copied; the y translation is the start of this render's scan window). `downDEG` (e.g. down15):
+// top and bottom as `ours`; the side sensors look DEG° down with a vertical laser plane, the
+// optical axis through the hot flange rim at mid-thickness (nominal part axis at the world origin)
 // 890 mm from the camera origin.
 std::vector<Face> faces(const std::string& geometry, double y_start, double flange_r_hot,
                         double flange_mid_z_hot) {
@@ -394,8 +398,9 @@ std::vector<Face> faces(const std::string& geometry, double y_start, double flan
         f[3].camera_to_world =
             pose(columns({0, 0, 1}, {0, 1, 0}, {-1, 0, 0}), Vector3d(890, y_start, 38));
     } else {
-        const double c = std::cos(15.0 * kPi / 180.0);
-        const double s = std::sin(15.0 * kPi / 180.0);
+        const double down_deg = std::stod(geometry.substr(4));
+        const double c = std::cos(down_deg * kPi / 180.0);
+        const double s = std::sin(down_deg * kPi / 180.0);
         for (int side = 0; side < 2; ++side) {
             const double sx = side == 0 ? 1.0 : -1.0;  // side1 at -x looks along +x
             const Vector3d z(sx * c, 0, -s);
