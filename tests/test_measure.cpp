@@ -330,3 +330,29 @@ TEST(MeasureEdges, SubSampleLocationRemovesTheLastPointBias) {
     EXPECT_LT(naive_err, -0.05);  // the bias is real: about one spacing on the diameter
     EXPECT_LT(std::abs(ours_err), 0.005);
 }
+
+TEST(MeasureRobustness, AnEdgeOutOfViewIsNotMeasuredAndTheReasonSaysWhere) {
+    // side1 sees nothing between world z 44 and 53 mm (the flange underside's edge is near 49 mm
+    // hot, the edge window ±2.5 mm): Height 3 side1 cannot be measured, and the reason names the
+    // edge, the profiles the wall was seen in and how many edge samples were needed; side2 is
+    // unaffected. (A gap ending inside the window would read as the edge: a no-return below a
+    // wall is what a silhouette edge looks like.)
+    auto s = simulate(env().cell, 7, 1000.0, {"side1", "side2"});
+    auto& f = s.recording.faces[0];
+    ASSERT_EQ(f.name, "side1");
+    const double z0 = f.T_world_camera.translation().z();
+    for (std::size_t q = 0; q < f.profiles_mm.size() / 2; ++q) {
+        const double z_world = z0 + f.T_world_camera.linear().row(2).x() * f.profiles_mm[2 * q] +
+                               f.T_world_camera.linear().row(2).z() * f.profiles_mm[2 * q + 1];
+        if (z_world > 44.0 && z_world < 53.0)
+            f.profiles_mm[2 * q] = f.profiles_mm[2 * q + 1] = std::nanf("");
+    }
+    const auto m = measure::measure_part(env().recipe, s.recording, s.truth.T_world_part);
+    const auto& h3 = feature(m, "Height 3 side1");
+    std::printf("Height 3 side1: %s\n", h3.reason.c_str());
+    EXPECT_FALSE(h3.hot_mm);
+    EXPECT_EQ(h3.verdict, measure::Verdict::kNotMeasured);
+    for (const char* part : {"flange_under", "profiles", "needed"})
+        EXPECT_NE(h3.reason.find(part), std::string::npos) << h3.reason;
+    EXPECT_TRUE(feature(m, "Height 3 side2").hot_mm) << feature(m, "Height 3 side2").reason;
+}

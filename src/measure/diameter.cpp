@@ -58,6 +58,24 @@ void coarse_edge(const Context& ctx, const core::FeatureSpec& f,
     }
 }
 
+// Which profiles of which faces held plane samples near the edge, for a reason.
+std::string profile_span(const std::vector<const FaceFrame*>& frames,
+                         const std::vector<std::vector<std::int64_t>>& seeds) {
+    std::string out;
+    for (std::size_t fi = 0; fi < frames.size(); ++fi) {
+        if (!out.empty()) out += ", ";
+        out += frames[fi]->scan->name;
+        if (seeds[fi].empty()) {
+            out += ": no plane samples near the edge";
+            continue;
+        }
+        const auto [lo, hi] = std::minmax_element(seeds[fi].begin(), seeds[fi].end());
+        out += " profiles " + std::to_string(*lo / frames[fi]->w) + "–" +
+               std::to_string(*hi / frames[fi]->w);
+    }
+    return out;
+}
+
 // Brackets across the edge within `window` of the circle (cc, rc), as 2D pairs (A, B).
 std::vector<Pair2d> edge_brackets(const Context& ctx, const std::vector<const FaceFrame*>& frames,
                                   const EdgePlane& ep,
@@ -105,7 +123,8 @@ std::optional<FineEdge> fine_edge(const Context& ctx, const core::FeatureSpec& f
         for (const auto& [A, B] : br) mids.push_back(0.5 * (A + B));
         if (static_cast<int>(mids.size()) < ctx.c.min_edge_points) {
             why = "edge of '" + f.section + "': only " + std::to_string(mids.size()) +
-                  " bracketed edge samples";
+                  " bracketed edge samples, " + std::to_string(ctx.c.min_edge_points) +
+                  " needed (" + profile_span(frames, seeds) + ")";
             return std::nullopt;
         }
         auto fit = fit_circle_robust(mids, {3.0, 0.02, 10});
@@ -224,7 +243,9 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
     coarse_edge(ctx, f, frames, *ep, R_e, win, coarse, seeds);
     if (static_cast<int>(coarse.size()) < ctx.c.min_edge_points) {
         r.reason = "edge of '" + f.section + "' at '" + f.edge_at + "': only " +
-                   std::to_string(coarse.size()) + " edge points near the expected radius";
+                   std::to_string(coarse.size()) + " edge points near the expected radius, " +
+                   std::to_string(ctx.c.min_edge_points) + " needed (" +
+                   profile_span(frames, seeds) + ")";
         return;
     }
     auto coarse_fit = fit_circle_robust(coarse, {3.0, 0.1, 10});

@@ -303,8 +303,8 @@ def main():
             print(f"    {est:16s} {where:30s} n {v.size:3d}  mean {v.mean() * 1000:+7.2f}  "
                   f"std {v.std() * 1000:6.2f}")
     else:
-        print("\nnotice: no per-feature estimator details (`ends`, `edge`) in the JSON: "
-              "per-estimator check skipped")
+        fail("no per-feature estimator details (`ends`, `edge`) in the JSON "
+             "(docs/measure-output.md)")
 
     # 4. uncertainty.
     if noisy:
