@@ -286,6 +286,25 @@ TEST(MeasureThermal, ColdIsHotOverGrowth) {
     EXPECT_NEAR(*d3.deviation_mm, *d3.cold_mm - 69.5, 1e-12);
 }
 
+TEST(MeasureThermal, ColdUncertaintyAddsThePyrometers) {
+    // u_cold² = (u/g)² + (cold·g′(T)·u_T/g)², g′ = α0 + 2·α1·(T − 20): a perfect pyrometer leaves
+    // only the hot value's share; a 5 K one adds 69.5·g′·5/g to Diameter 3.
+    const auto s = simulate(env().cell, 9, 1250.0, {"top"});
+    measure::MeasureConfig exact;
+    exact.temperature_u_c = 0.0;
+    const auto m0 =
+        measure::measure_part(env().recipe, s.recording, s.truth.T_world_part, {}, exact);
+    const auto m5 = measure::measure_part(env().recipe, s.recording, s.truth.T_world_part);
+    const double g = 1.0 + (1.2e-5 + 3.0e-9 * 1230.0) * 1230.0, dg = 1.2e-5 + 2 * 3.0e-9 * 1230.0;
+    const auto &d0 = feature(m0, "Diameter 3"), &d5 = feature(m5, "Diameter 3");
+    ASSERT_TRUE(d0.u_cold_mm && d5.u_cold_mm);
+    EXPECT_NEAR(*d0.u_cold_mm, d0.u_mm / g, 1e-12);
+    EXPECT_NEAR(*d5.u_cold_mm, std::hypot(d5.u_mm / g, *d5.cold_mm * dg * 5.0 / g), 1e-12);
+    // The pyrometer's share: 69.5 mm · 1.94e-5 /K · 5 K ≈ 6.7 µm (hot length, scaled to cold).
+    const double share = std::sqrt(std::pow(*d5.u_cold_mm, 2) - std::pow(*d0.u_cold_mm, 2));
+    EXPECT_NEAR(share, 69.5 * dg * 5.0, 0.0005);
+}
+
 TEST(MeasureEdges, SubSampleLocationRemovesTheLastPointBias) {
     // Noise-free top scan: "the edge is the last point on the plane" puts the boss edge inside
     // the material by about half a point spacing; bracketing by the neighbouring rays does not.

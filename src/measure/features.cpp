@@ -85,7 +85,8 @@ std::map<std::string, detail::FaceFrame> prepare_faces(const detail::Context& ct
 }
 
 // Cold equivalent, deviation and verdict of a measured feature; tolerances are on cold values.
-void judge(const core::Recording& rec, const std::optional<double>& growth, FeatureResult& r) {
+void judge(const core::Recording& rec, const core::ThermalModel& material,
+           const std::optional<double>& growth, double temperature_u_c, FeatureResult& r) {
     if (!r.hot_mm) {
         r.verdict = Verdict::kNotMeasured;
         return;
@@ -100,6 +101,10 @@ void judge(const core::Recording& rec, const std::optional<double>& growth, Feat
         return;
     }
     r.cold_mm = *r.hot_mm / *growth;
+    // g(T) = 1 + α0·(T − 20) + α1·(T − 20)², so dg/dT = α0 + 2·α1·(T − 20).
+    const double dg_dt =
+        material.alpha0_per_k + 2.0 * material.alpha1_per_k2 * (*rec.temperature_c - 20.0);
+    r.u_cold_mm = std::hypot(r.u_mm / *growth, *r.cold_mm * dg_dt * temperature_u_c / *growth);
     r.deviation_mm = *r.cold_mm - r.nominal_mm;
     const bool ok = *r.deviation_mm >= r.tol_lower_mm && *r.deviation_mm <= r.tol_upper_mm;
     r.verdict = ok ? Verdict::kOk : Verdict::kNok;
@@ -160,7 +165,7 @@ PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& 
         measure_one(ctx, frames, recipe.features[i], measured[i]);
     });
     for (FeatureResult& r : measured) {
-        judge(rec, out.growth, r);
+        judge(rec, recipe.material, out.growth, config.temperature_u_c, r);
         out.features.push_back(std::move(r));
     }
     out.verdict = overall(out.features);

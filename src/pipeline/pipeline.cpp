@@ -227,6 +227,7 @@ std::string to_json(const PartResult& r) {
         fj["fit_rms_mm"] = measured ? json(f.fit_rms_mm) : json();
         fj["n_points"] = f.n_points;
         fj["u_mm"] = measured ? json(f.u_mm) : json();
+        fj["u_cold_mm"] = opt(f.u_cold_mm);
         fj["sector_spread_mm"] = opt(f.sector_spread_mm);
         fj["n_sectors"] = f.n_sectors;
         if (f.kind == core::FeatureKind::kDiameter && measured) fj["arc_deg"] = f.arc_deg;

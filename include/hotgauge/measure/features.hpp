@@ -39,6 +39,9 @@ struct MeasureConfig {
     // Standard uncertainty of the part axis's direction from the pose (match: worst 0.016° over
     // 200 random placements, docs/matching.md): enters heights that rely on the axis's lean.
     double pose_axis_u_deg = 0.01;
+    // Standard uncertainty of the pyrometer's reading (a two-colour pyrometer on scaled steel:
+    // a few kelvin): enters the cold value through the growth's slope dg/dT.
+    double temperature_u_c = 5.0;
 };
 
 enum class Verdict { kOk, kNok, kNotMeasured };
@@ -64,9 +67,10 @@ struct FeatureResult {
     int slot = 0;
     std::vector<std::string> faces;
     Verdict verdict = Verdict::kNotMeasured;
-    std::string reason;             // why not measured / why NOK; empty when OK
-    std::optional<double> hot_mm;   // as measured at the part temperature
-    std::optional<double> cold_mm;  // hot / (1 + α(T)·(T − 20)); needs the temperature
+    std::string reason;               // why not measured / why NOK; empty when OK
+    std::optional<double> hot_mm;     // as measured at the part temperature
+    std::optional<double> cold_mm;    // hot / (1 + α(T)·(T − 20)); needs the temperature
+    std::optional<double> u_cold_mm;  // cold_mm's standard uncertainty: u_mm and the pyrometer's
     double nominal_mm = 0, tol_lower_mm = 0, tol_upper_mm = 0;
     std::optional<double> deviation_mm;  // cold − nominal
     double fit_rms_mm = 0;               // RMS residual of the fit(s) behind the value
