@@ -223,7 +223,7 @@ std::optional<EdgePlane> edge_plane(const Context& ctx, const core::FeatureSpec&
     ep.plane = pl.fit;
     if (ep.plane.normal.dot(frames.front()->view) > 0) ep.plane.normal = -ep.plane.normal;
     ep.thr = surface_threshold(ep.plane.rms_mm, ctx.c);
-    ep.profile_scatter = pl.profile_scatter_mm;
+    ep.profile_scatter = profile_scatter(pl);
     ep.e1 = ep.plane.normal.unitOrthogonal();
     ep.e2 = ep.plane.normal.cross(ep.e1);
     return ep;

@@ -26,7 +26,8 @@ struct LevelEnd {
     Eigen::Vector3d ref = Eigen::Vector3d::Zero();  // the end's point (on the plane at the wall)
     std::vector<double> angles;                     // silhouette: azimuth of each bracket
     std::vector<Interval> intervals;                // silhouette: each bracket's z interval
-    double u_pose = 0;                              // share of est.u_mm from the pose's axis
+    double u_fit = 0;                               // est.u_mm's share from the end's own fit ...
+    double u_pose = 0;  // ... and from the pose's axis: est.u_mm = hypot(u_fit, u_pose)
 };
 
 // Standard uncertainty of a plane's height at `p` from its points: offset and tilt (lever arm).
@@ -113,7 +114,8 @@ std::optional<LevelEnd> corner_end(const Context& ctx, const std::string& level,
     LevelEnd e;
     e.plane = pl.fit;
     e.ref = on_plane_at(pl.fit, w.radius.mean, w.phi);
-    e.est = {level, "convex corner", {}, e.ref.z(), plane_u_at(pl, e.ref), pl.fit.n_points};
+    e.u_fit = plane_u_at(pl, e.ref);
+    e.est = {level, "convex corner", {}, e.ref.z(), e.u_fit, pl.fit.n_points};
     return e;
 }
 
@@ -161,9 +163,8 @@ std::optional<LevelEnd> support_end(const Context& ctx, const std::string& level
     e.ref = {0.0, 0.0, z_end};
     // The lean of the axis against the plate comes from the pose: its error moves the rim by R·δ.
     e.u_pose = R * ctx.c.pose_axis_u_deg / kRadToDeg;
-    e.est = {
-        level,          "concave corner", {}, z_end, std::hypot(plane_u_at(pl, e.ref), e.u_pose),
-        pl.fit.n_points};
+    e.u_fit = plane_u_at(pl, e.ref);
+    e.est = {level, "concave corner", {}, z_end, std::hypot(e.u_fit, e.u_pose), pl.fit.n_points};
     return e;
 }
 
@@ -208,6 +209,7 @@ std::optional<LevelEnd> silhouette_end(const Context& ctx, const std::string& le
     }
     const IntervalEstimate s = stab(e.intervals);
     e.ref = {w.radius.mean * std::cos(w.phi), w.radius.mean * std::sin(w.phi), s.value};
+    e.u_fit = s.u;
     e.est = {level, "silhouette edge", {}, s.value, s.u, s.n_used};
     return e;
 }
@@ -284,11 +286,8 @@ void height_edges(const Context& ctx, const core::FeatureSpec& f,
     r.reason.clear();
     r.hot_mm = height_between(e[0], e[1]);
     r.n_points = e[0].est.n_points + e[1].est.n_points;
-    const double u_pose = std::hypot(e[0].u_pose, e[1].u_pose);
-    r.u_budget = {
-        {"fit", std::sqrt(std::max(0.0, std::pow(e[0].est.u_mm, 2) + std::pow(e[1].est.u_mm, 2) -
-                                            u_pose * u_pose))},
-        {"pose", u_pose}};
+    r.u_budget = {{"fit", std::hypot(e[0].u_fit, e[1].u_fit)},
+                  {"pose", std::hypot(e[0].u_pose, e[1].u_pose)}};
     const int planes = (e[0].plane ? 1 : 0) + (e[1].plane ? 1 : 0);
     r.method = planes == 2 ? "planes" : planes == 1 ? "plane and edge" : "edges";
     for (const auto& end : e) {

@@ -28,42 +28,6 @@ std::vector<Annulus> annuli_at(const core::AxisymmetricSolid& s, double z) {
     return out;
 }
 
-namespace {
-
-// How far whole profiles sit off the fitted plane beyond what the range noise explains: the
-// residual of the vibration compensation along the plane's normal (docs/measurement.md,
-// "Uncertainty"). From the mean residual of each profile with enough points on the plane.
-double profile_scatter(const std::vector<Eigen::Vector3d>& points,
-                       const std::vector<std::int64_t>& key, const PlaneFit& plane) {
-    constexpr std::size_t kMinPointsPerProfile = 20;
-    std::vector<std::size_t> order(points.size());
-    for (std::size_t q = 0; q < order.size(); ++q) order[q] = q;
-    std::sort(order.begin(), order.end(), [&](auto a, auto b) { return key[a] < key[b]; });
-    double s_mean2 = 0, s_noise2 = 0;
-    std::size_t profiles = 0;
-    for (std::size_t a = 0; a < order.size();) {
-        std::size_t b = a;
-        double s = 0, s2 = 0;
-        for (; b < order.size() && key[order[b]] == key[order[a]]; ++b) {
-            const double d = plane.distance(points[order[b]]);
-            s += d;
-            s2 += d * d;
-        }
-        const auto n = static_cast<double>(b - a);
-        if (b - a >= kMinPointsPerProfile) {
-            const double mean = s / n, var = std::max(0.0, s2 / n - mean * mean);
-            s_mean2 += mean * mean;
-            s_noise2 += var / (n - 1.0);
-            ++profiles;
-        }
-        a = b;
-    }
-    if (profiles < 10) return 0.0;
-    return std::sqrt(std::max(0.0, (s_mean2 - s_noise2) / static_cast<double>(profiles)));
-}
-
-}  // namespace
-
 PlaneResult fit_level_plane(const std::vector<const FaceFrame*>& frames, double z_e, double band,
                             double r_lo, double r_hi, const MeasureConfig& c,
                             const std::string& what) {
@@ -119,15 +83,44 @@ PlaneResult fit_level_plane(const std::vector<const FaceFrame*>& frames, double 
         out.error = what + ": " + fit.error().message;
         return out;
     }
-    std::vector<std::int64_t> used_key;
     for (std::size_t q = 0; q < in.size(); ++q)
         if (fit->inlier[q]) {
             out.points.push_back(in[q]);
-            used_key.push_back(in_key[q]);
+            out.profile_keys.push_back(in_key[q]);
         }
     out.fit = fit->fit;
-    out.profile_scatter_mm = profile_scatter(out.points, used_key, out.fit);
     return out;
+}
+
+double profile_scatter(const PlaneResult& pl) {
+    const std::vector<Eigen::Vector3d>& points = pl.points;
+    const std::vector<std::int64_t>& key = pl.profile_keys;
+    const PlaneFit& plane = pl.fit;
+    constexpr std::size_t kMinPointsPerProfile = 20;
+    std::vector<std::size_t> order(points.size());
+    for (std::size_t q = 0; q < order.size(); ++q) order[q] = q;
+    std::sort(order.begin(), order.end(), [&](auto a, auto b) { return key[a] < key[b]; });
+    double s_mean2 = 0, s_noise2 = 0;
+    std::size_t profiles = 0;
+    for (std::size_t a = 0; a < order.size();) {
+        std::size_t b = a;
+        double s = 0, s2 = 0;
+        for (; b < order.size() && key[order[b]] == key[order[a]]; ++b) {
+            const double d = plane.distance(points[order[b]]);
+            s += d;
+            s2 += d * d;
+        }
+        const auto n = static_cast<double>(b - a);
+        if (b - a >= kMinPointsPerProfile) {
+            const double mean = s / n, var = std::max(0.0, s2 / n - mean * mean);
+            s_mean2 += mean * mean;
+            s_noise2 += var / (n - 1.0);
+            ++profiles;
+        }
+        a = b;
+    }
+    if (profiles < 10) return 0.0;
+    return std::sqrt(std::max(0.0, (s_mean2 - s_noise2) / static_cast<double>(profiles)));
 }
 
 bool Context::faces_sensors(const Annulus& a, const std::vector<const FaceFrame*>& frames) {

@@ -28,8 +28,8 @@ std::vector<Annulus> annuli_at(const core::AxisymmetricSolid& s, double z);
 
 struct PlaneResult {
     PlaneFit fit;
-    std::vector<Eigen::Vector3d> points;  // inliers
-    double profile_scatter_mm = 0;        // profiles' offsets from the plane beyond noise
+    std::vector<Eigen::Vector3d> points;     // inliers
+    std::vector<std::int64_t> profile_keys;  // per inlier: face index << 32 | profile
     std::string error;
 };
 // Least-squares plane of the annulus [r_lo, r_hi] at hot height z_e (±band), from all given
@@ -37,6 +37,11 @@ struct PlaneResult {
 PlaneResult fit_level_plane(const std::vector<const FaceFrame*>& frames, double z_e, double band,
                             double r_lo, double r_hi, const MeasureConfig& c,
                             const std::string& what);
+
+// How far whole profiles sit off the fitted plane beyond what the range noise explains: the
+// residual of the vibration compensation along the plane's normal (docs/measurement.md,
+// "Uncertainty"). From the mean residual of each profile with ≥ 20 points on the plane.
+double profile_scatter(const PlaneResult& pl);
 
 struct Context {
     const core::Recipe& recipe;
