@@ -71,6 +71,40 @@ for f in m["features"]:
 assert sum(f["hot_mm"] is not None for f in m["features"]) >= 10
 print("match ok: score", m["match"]["score"])
 PY
+# --calibration (docs/calibration.md): the cell's geometry replaces the recording's face.yaml.
+# The shipped nominal calibration holds the geometry the simulator wrote: the same numbers. A
+# travel scale of 1.002 on every face stretches the part along the scan: Diameter 3 reads larger,
+# by up to half of 0.2 % (an ellipse stretched along one axis; less, as the given pose is no
+# longer on the stretched part's axis). A calibration without one of the recording's faces is
+# refused by name.
+"$bin" measure "$tmp/rec" --json --part-pose "$tmp/pose.yaml" \
+  --calibration "$src/config/calibration.yaml" > "$tmp/cal.json" 2> "$tmp/cal.err" \
+  || fail "measure --calibration"
+grep -q "method nominal: design geometry, not measured" "$tmp/cal.err" || fail "no nominal warning"
+sed 's/travel_scale: 1$/travel_scale: 1.002/' "$src/config/calibration.yaml" > "$tmp/scaled.yaml"
+"$bin" measure "$tmp/rec" --json --part-pose "$tmp/pose.yaml" --calibration "$tmp/scaled.yaml" \
+  > "$tmp/scaled.json" 2> /dev/null || fail "measure --calibration scaled"
+/usr/bin/python3 - "$tmp/m.json" "$tmp/cal.json" "$tmp/scaled.json" <<'PY' || fail "--calibration"
+import json, sys
+plain, cal, scaled = ({f["name"]: f["hot_mm"] for f in json.load(open(p))["features"]}
+                      for p in sys.argv[1:4])
+assert plain == cal, [(k, plain[k], cal[k]) for k in plain if plain[k] != cal[k]]
+d = scaled["Diameter 3"] - plain["Diameter 3"]
+expect = plain["Diameter 3"] * 0.001
+assert 0.25 * expect < d < 1.5 * expect, (d, expect)
+print(f"calibration ok: nominal identical, travel scale 1.002 moves Diameter 3 by {d:.4f} mm")
+PY
+/usr/bin/python3 - "$src/config/calibration.yaml" "$tmp/noside2.yaml" <<'PY'
+import sys, yaml
+c = yaml.safe_load(open(sys.argv[1]))
+c["faces"] = [f for f in c["faces"] if f["name"] != "side2"]
+yaml.safe_dump(c, open(sys.argv[2], "w"))
+PY
+set +e
+"$bin" measure "$tmp/rec" --calibration "$tmp/noside2.yaml" 2> "$tmp/err"; rc=$?
+set -e
+[ $rc -eq 1 ] || fail "a calibration without side2 exited $rc"
+grep -q "noside2.yaml: no face 'side2' (the recording has it)" "$tmp/err" || fail "$(cat "$tmp/err")"
 # --pose truth needs the truth: without it, a clear error.
 set +e
 "$bin" measure "$tmp/rec" --pose truth 2> "$tmp/err"; rc=$?

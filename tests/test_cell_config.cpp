@@ -53,7 +53,7 @@ std::string error_with(const std::string& from, const std::string& to, int* line
         ASSERT_NE(at, std::string::npos) << a;
         text.replace(at, a.size(), b);
     };
-    swap("cell: cell.yaml", "cell: " + kConfigDir + "/cell.yaml");
+    swap("calibration: calibration.yaml", "calibration: " + kConfigDir + "/calibration.yaml");
     swap("1: parts/hub-a.yaml", "1: " + kConfigDir + "/parts/hub-a.yaml");
     if (from.empty()) {
         text += to + "\n";
@@ -98,6 +98,26 @@ TEST(DaemonConfig, MistakesAreNamedWithFileLineAndKey) {
     EXPECT_NE(e.find("accelerometer.source"), std::string::npos) << e;
     e = error_with("  id: 127.0.0.2", "  name: 127.0.0.2");
     EXPECT_NE(e.find("camera"), std::string::npos) << e;
+}
+
+// The geometry moved from the simulator's cell config to the calibration, the clock offset
+// with it: a config written for the old keys says where they went.
+TEST(DaemonConfig, GeometryKeysThatMovedToTheCalibrationSaySo) {
+    auto e = error_with("calibration: " + kConfigDir + "/calibration.yaml",
+                        "cell: " + kConfigDir + "/cell.yaml");
+    EXPECT_NE(e.find("cell: the daemon takes the cell's geometry from its calibration"),
+              std::string::npos)
+        << e;
+    e = error_with("  line_rate_hz: 1000", "  line_rate_hz: 1000\n  clock_offset_ns: 1500");
+    EXPECT_NE(e.find("camera.clock_offset_ns: the camera → accelerometer clock offset is measured "
+                     "now: clock_offset_ns in the calibration file"),
+              std::string::npos)
+        << e;
+    e = error_with("calibration: " + kConfigDir + "/calibration.yaml",
+                   "calibration: /nonexistent/calibration.yaml");
+    EXPECT_NE(e.find("calibration: /nonexistent/calibration.yaml does not exist"),
+              std::string::npos)
+        << e;
 }
 
 TEST(DaemonConfig, AMissingFileIsNamed) {

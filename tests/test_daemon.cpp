@@ -23,8 +23,9 @@ using namespace std::chrono_literals;
 std::string config_text(const std::filesystem::path& results,
                         const std::string& axis = "axis:\n  kind: none\n") {
     const std::string src = HOTGAUGE_SOURCE_DIR;
-    return "cell: " + src + "/config/cell.yaml\n" + "faces: [top, bottom, side1, side2]\n" +
-           "recipes:\n  1: " + src + "/config/parts/hub-a.yaml\n" +
+    return "calibration: " + src + "/config/calibration.yaml\n" +
+           "faces: [top, bottom, side1, side2]\n" + "recipes:\n  1: " + src +
+           "/config/parts/hub-a.yaml\n" +
            "camera:\n  id: NO-SUCH-CAMERA\n  mode: peaks\n  height: 10\n  scan_s: 0.5\n" +
            "accelerometer:\n  source: none\n" + axis +
            "plc:\n  bind_address: 127.0.0.1\n  port: 0\n" + "results:\n  dir: " + results.string() +

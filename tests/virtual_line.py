@@ -277,7 +277,7 @@ class Line:
 
     def write_config(self, text=None):
         cfg = text or f"""# written by tests/virtual_line.py for the virtual cell
-cell: {REPO}/config/cell.yaml
+calibration: {REPO}/config/calibration.yaml
 faces: [top, bottom, side1, side2]
 recipes:
   1: {REPO}/config/parts/hub-a.yaml

@@ -5,6 +5,7 @@
 #include <filesystem>
 
 #include "commands.hpp"
+#include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/core/geometry.hpp"
 #include "hotgauge/io/model_io.hpp"
 #include "hotgauge/io/ply.hpp"
@@ -25,6 +26,7 @@ struct MeasureArgs {
     std::string part_pose;       // a pose file: no matching
     std::string model;           // a saved model (hotgauge model build); default: from the recipe
     std::string ply;
+    std::string calibration;  // the cell's geometry in place of the recording's face.yaml
     bool json = false;
     bool no_compensation = false;
     double clock_offset_ms = 0.0;
@@ -36,6 +38,16 @@ int run(const MeasureArgs& a) {
     if (!rec) {
         spdlog::error("{}", rec.error().message);
         return 1;
+    }
+    if (!a.calibration.empty()) {
+        auto cal = calib::read_calibration(a.calibration);
+        auto applied = cal ? calib::apply_geometry(*cal, a.calibration, *rec) : cal.error();
+        if (!applied) {
+            spdlog::error("{}", applied.error().message);
+            return 1;
+        }
+        if (!cal->measured())
+            spdlog::warn("{}: method nominal: design geometry, not measured", a.calibration);
     }
     const std::string recipe_path =
         a.recipe.empty() ? std::string(HOTGAUGE_CONFIG_DIR "/parts/") + rec->recipe + ".yaml"
@@ -130,6 +142,9 @@ Command add_measure(CLI::App& app) {
         ->capture_default_str();
     s->add_option("--highpass-hz", a->highpass_hz,
                   "compensation high-pass corner, Hz (default 1.5)");
+    s->add_option("--calibration", a->calibration,
+                  "calibration.yaml: the cell's geometry replaces the recording's face.yaml "
+                  "(docs/calibration.md)");
     s->add_option("--ply", a->ply, "write the world cloud of all faces as binary PLY");
     return [a] { return run(*a); };
 }

@@ -15,5 +15,6 @@ Command add_fit(CLI::App& app);
 Command add_model(CLI::App& app);
 Command add_grab(CLI::App& app);
 Command add_plc(CLI::App& app);
+Command add_calibrate(CLI::App& app);
 
 }  // namespace hotgauge::app

@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
     add(hotgauge::app::add_model);
     add(hotgauge::app::add_grab);
     add(hotgauge::app::add_plc);
+    add(hotgauge::app::add_calibrate);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

@@ -65,7 +65,7 @@ void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a)
                   "scan_s",
                   "speed_mm_s",
                   "line_rate_hz",
-                  "clock_offset_ns",
+                  "clock_offset_ns",  // moved to the calibration: refused below, by name
                   "peaks",
                   "stripe",
                   "exposure_table"});
@@ -108,7 +108,9 @@ void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a)
     scan.speed_mm_s = positive(y, c, w, "speed_mm_s", scan.speed_mm_s);
     scan.line_period_s = 1.0 / positive(y, c, w, "line_rate_hz", 1.0 / scan.line_period_s);
     if (c["clock_offset_ns"])
-        scan.clock_offset_ns = y.integer(c["clock_offset_ns"], w + ".clock_offset_ns");
+        y.fail(c["clock_offset_ns"], w + ".clock_offset_ns: the camera → accelerometer clock "
+                                         "offset is measured now: clock_offset_ns in the "
+                                         "calibration file (docs/calibration.md)");
     if (const YAML::Node p = c["peaks"]) {
         const std::string pw = w + ".peaks";
         y.expect_map(p, pw,
@@ -167,13 +169,19 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
     return y.guarded<DaemonConfig>([&] {
         const YAML::Node root = y.load();
         y.expect_map(root, "hotgauged",
-                     {"cell", "faces", "recipes", "models", "camera", "accelerometer", "axis",
-                      "plc", "pyrometer", "results"});
+                     {"calibration", "faces", "recipes", "models", "camera", "accelerometer",
+                      "axis", "plc", "pyrometer", "results",
+                      "cell"});  // cell: moved to the calibration, refused below by name
         DaemonConfig c;
         c.file = file;
         c.hash = file_hash(file);
         const fs::path base = file.parent_path();
-        c.cell_file = existing(y, y.require(root, "hotgauged", "cell"), "cell", base);
+        if (root["cell"])
+            y.fail(root["cell"],
+                   "cell: the daemon takes the cell's geometry from its "
+                   "calibration now: calibration: FILE (docs/calibration.md)");
+        c.calibration_file =
+            existing(y, y.require(root, "hotgauged", "calibration"), "calibration", base);
 
         const YAML::Node recipes = y.require(root, "hotgauged", "recipes");
         if (!recipes.IsMap() || recipes.size() == 0)

@@ -21,7 +21,6 @@
 #include "hotgauge/plc/server.hpp"
 #include "hotgauge/results/archive.hpp"
 #include "hotgauge/results/results_log.hpp"
-#include "hotgauge/vcell/render.hpp"
 #include "queue.hpp"
 
 namespace hotgauge::cell {
@@ -114,16 +113,13 @@ core::Result<std::shared_ptr<const Setup>> load_setup(const fs::path& config_fil
     if (!config) return config.error();
     auto s = std::make_shared<Setup>();
     s->config = std::move(*config);
-    auto cell = sim::read_cell_config(s->config.cell_file);
-    if (!cell) return cell.error();
-    s->cell = std::move(*cell);
-    for (const auto& name : s->config.faces) {
-        const bool known = std::any_of(s->cell.faces.begin(), s->cell.faces.end(),
-                                       [&](const auto& f) { return f.name == name; });
-        if (!known)
+    auto calibration = calib::read_calibration(s->config.calibration_file);
+    if (!calibration) return calibration.error();
+    s->calibration = std::move(*calibration);
+    for (const auto& name : s->config.faces)
+        if (!s->calibration.face(name))
             return core::make_error(s->config.file.string() + ": faces: '" + name +
-                                    "' is not a face of " + s->config.cell_file.string());
-    }
+                                    "' is not a face of " + s->config.calibration_file.string());
     for (const auto& [slot, path] : s->config.recipes) {
         auto recipe = io::read_recipe(path);
         if (!recipe) return recipe.error();
@@ -147,8 +143,9 @@ core::Result<std::shared_ptr<const Setup>> load_setup(const fs::path& config_fil
         s->models.emplace(slot, std::move(model));
         s->recipes.emplace(slot, std::move(*recipe));
     }
-    auto tri = vcell::sensor_triangulation(s->cell.sensor);
-    if (!tri) return core::make_error(s->config.cell_file.string() + ": " + tri.error().message);
+    auto tri = calib::triangulation(s->calibration.sensor);
+    if (!tri)
+        return core::make_error(s->config.calibration_file.string() + ": " + tri.error().message);
     s->triangulation.emplace(std::move(*tri));
     auto table = acquire::ExposureTable::create(s->config.acquisition.exposure_table);
     if (!table)
@@ -162,7 +159,11 @@ std::string describe(const Setup& s) {
     std::ostringstream o;
     const auto& c = s.config;
     o << "config " << c.file.string() << " (hash " << c.hash << ")\n";
-    o << "  cell " << c.cell_file.string() << ": faces";
+    const calib::Calibration& cal = s.calibration;
+    o << "  calibration " << c.calibration_file.string() << ": " << cal.method << ", "
+      << cal.calibrated_at << " from " << cal.source
+      << (cal.measured() ? "" : " (design values, NOT MEASURED: commission the cell)") << "\n";
+    o << "  faces";
     for (const auto& f : c.faces) o << " " << f;
     o << "\n";
     for (const auto& [slot, r] : s.recipes)
@@ -483,10 +484,10 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
                                                double margin_s,
                                                std::optional<double> exposure_temperature,
                                                core::Recording& rec) {
-    const auto face = std::find_if(s.cell.faces.begin(), s.cell.faces.end(),
-                                   [&](const auto& f) { return f.name == name; });
-    if (face == s.cell.faces.end())
-        return Failure{plc::ErrorCode::kMeasurementFailed, "no face '" + name + "' in the cell"};
+    const calib::FaceGeometry* face = s.calibration.face(name);
+    if (!face)
+        return Failure{plc::ErrorCode::kMeasurementFailed,
+                       "no face '" + name + "' in the calibration"};
     if (axis) {
         const auto pos = s.config.axis.faces.find(name);
         if (pos == s.config.axis.faces.end())
@@ -514,6 +515,8 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
     sc.T_world_camera = face->T_world_camera;
     sc.scan_direction = face->scan_direction;
     sc.R_camera_accel = face->R_camera_accel;
+    sc.speed_mm_s *= face->travel_scale;  // the true travel per commanded mm, as calibrated
+    sc.clock_offset_ns = s.calibration.clock_offset_ns;
     session->set_scan_config(sc);
     acq_beat = steady_ns();
     if (accel) await_accel_history(margin_s);

@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
     bool check = false;
     app.add_option("--config", config, "the daemon's YAML config")->capture_default_str();
     app.add_flag("--check-config", check,
-                 "validate the config, the recipes, models and cell config it names, then exit");
+                 "validate the config, the recipes, models and calibration it names, then exit");
     app.set_version_flag("--version", std::string(HOTGAUGE_VERSION));
     try {
         app.parse(argc, argv);

@@ -40,7 +40,7 @@ struct AcquisitionConfig {
 
 struct DaemonConfig {
     std::filesystem::path file;                    // where it was read from
-    std::filesystem::path cell_file;               // face geometry (camera poses): the cell config
+    std::filesystem::path calibration_file;        // the cell's measured geometry (calib)
     std::map<int, std::filesystem::path> recipes;  // PLC recipe slot -> recipe file
     std::map<int, std::filesystem::path> models;   // optional saved .hgm models per slot
     std::vector<std::string> faces;                // scan order for "all faces"
@@ -56,7 +56,7 @@ struct DaemonConfig {
 };
 
 // Reads and validates; errors name file:line and the key. Referenced files (recipes, models,
-// the cell config) must exist; their content is checked by their own readers at start.
+// the calibration) must exist; their content is checked by their own readers at start.
 core::Result<DaemonConfig> read_daemon_config(const std::filesystem::path& file);
 
 }  // namespace hotgauge::cell

@@ -24,20 +24,20 @@
 
 #include "hotgauge/acquire/session.hpp"
 #include "hotgauge/acquire/triangulation.hpp"
+#include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/cell/config.hpp"
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/result.hpp"
 #include "hotgauge/match/model.hpp"
-#include "hotgauge/sim/simulator.hpp"
 
 namespace hotgauge::cell {
 
 // Everything a configuration needs before the first part, built at start and again at reload:
-// the config, the face geometry, the recipes and their part models (built or loaded), the
-// sensor model and the exposure table. Immutable once built; parts in flight keep theirs.
+// the config, the cell's calibrated geometry, the recipes and their part models (built or loaded),
+// the sensor model and the exposure table. Immutable once built; parts in flight keep theirs.
 struct Setup {
     DaemonConfig config;
-    sim::CellConfig cell;
+    calib::Calibration calibration;
     std::map<int, core::Recipe> recipes;                        // by PLC recipe slot
     std::map<int, std::shared_ptr<const match::Model>> models;  // by slot
     std::optional<acquire::Triangulation> triangulation;

@@ -1,0 +1,73 @@
+#pragma once
+// The cell's measured geometry (docs/calibration.md): the sensor's triangulation model, each
+// face's camera pose, scan direction and travel scale, the accelerometer's mount and bias, and
+// the camera → accelerometer clock offset, with when, how and from what they were measured.
+// One file, calibration.yaml; the daemon and `hotgauge measure --calibration` take the geometry
+// from it, never from the simulator's cell config.
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "hotgauge/acquire/triangulation.hpp"
+#include "hotgauge/core/recording.hpp"
+#include "hotgauge/core/result.hpp"
+
+namespace hotgauge::calib {
+
+// A line-laser head as a direct-beam design (acquire::design_direct_beam): ray i of the fan at
+// x_i = (i − (width−1)/2)·pitch on the plane z = standoff, the imager `baseline_mm` beside the
+// laser origin along the camera's y.
+struct SensorModel {
+    int width = 2048;
+    double pitch_mm = 0.2;
+    double standoff_mm = 890.0;
+    double min_range_mm = 600.0;
+    double max_range_mm = 1200.0;
+    double baseline_mm = 300.0;
+};
+
+struct FaceGeometry {
+    std::string name;
+    Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();  // at profile position 0
+    Eigen::Vector3d scan_direction = Eigen::Vector3d::UnitY();         // unit, world
+    double travel_scale = 1.0;  // true travel / commanded travel (axis speed or encoder error)
+    Eigen::Matrix3d R_camera_accel = Eigen::Matrix3d::Identity();  // accel axes → camera axes
+};
+
+struct Calibration {
+    std::string calibrated_at;                // ISO 8601 UTC
+    std::string method;                       // nominal | artifact | ... (docs/calibration.md)
+    std::string source;                       // the artifact, target or file the geometry came from
+    std::map<std::string, double> residuals;  // method-specific figures, mm / px / deg / µs
+    SensorModel sensor;
+    std::vector<FaceGeometry> faces;
+    Eigen::Vector3d accel_bias_mps2 = Eigen::Vector3d::Zero();  // accelerometer axes
+    std::int64_t clock_offset_ns = 0;  // added to camera timestamps: camera → accel clock
+
+    const FaceGeometry* face(const std::string& name) const;
+    // Whether the geometry was measured (false: design values asserted, method `nominal`).
+    bool measured() const { return method != "nominal"; }
+};
+
+// Reads calibration.yaml; errors name file:line and key. Every face's rotations must be proper
+// (orthonormal, det +1), scan directions unit, names unique, the sensor's ranges ordered.
+core::Result<Calibration> read_calibration(const std::filesystem::path& file);
+
+// Writes calibration.yaml (full double precision, so reading it back gives the same numbers).
+core::Result<void> write_calibration(const Calibration& c, const std::filesystem::path& file);
+
+// A recording's faces take the calibration's geometry in place of their face.yaml's: camera
+// pose, scan direction, accelerometer axes, and the profile positions scaled by travel_scale.
+// The profiles stay as recorded (they are millimetres already: the sensor model was applied at
+// capture), and so do the times (one clock by the recording contract). A face the calibration
+// does not hold is an error naming it and `calibration_file`; nothing is changed then.
+core::Result<void> apply_geometry(const Calibration& c, const std::string& calibration_file,
+                                  core::Recording& recording);
+
+// The sensor model as the triangulation the acquisition uses (rows over the measuring range).
+core::Result<acquire::Triangulation> triangulation(const SensorModel& sensor, int height_px = 1088);
+
+}  // namespace hotgauge::calib

@@ -1,0 +1,207 @@
+#include "hotgauge/calib/calibration.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "hotgauge/io/yaml_reader.hpp"
+
+namespace hotgauge::calib {
+namespace {
+
+using io::YamlReader;
+
+constexpr const char* kFormat = "hotgauge-calibration-1";
+
+double positive(const YamlReader& y, const YAML::Node& map, const std::string& what,
+                const char* key) {
+    const double v = y.number(y.require(map, what, key), what + "." + key);
+    if (!(v > 0.0)) y.fail(map[key], what + "." + key + ": must be positive");
+    return v;
+}
+
+SensorModel read_sensor(const YamlReader& y, const YAML::Node& s) {
+    const std::string w = "sensor";
+    y.expect_map(s, w,
+                 {"model", "width", "pitch_mm", "standoff_mm", "min_range_mm", "max_range_mm",
+                  "baseline_mm"});
+    const std::string model = y.string(y.require(s, w, "model"), w + ".model");
+    if (model != "direct_beam")
+        y.fail(s["model"], w + ".model: '" + model + "' is not known (direct_beam)");
+    SensorModel m;
+    m.width = static_cast<int>(y.integer(y.require(s, w, "width"), w + ".width"));
+    if (m.width < 2) y.fail(s["width"], w + ".width: must be >= 2");
+    m.pitch_mm = positive(y, s, w, "pitch_mm");
+    m.standoff_mm = positive(y, s, w, "standoff_mm");
+    m.min_range_mm = positive(y, s, w, "min_range_mm");
+    m.max_range_mm = positive(y, s, w, "max_range_mm");
+    if (m.min_range_mm >= m.max_range_mm)
+        y.fail(s, w + ": min_range_mm must be below max_range_mm");
+    m.baseline_mm = positive(y, s, w, "baseline_mm");
+    return m;
+}
+
+FaceGeometry read_face(const YamlReader& y, const YAML::Node& f, const std::string& w) {
+    y.expect_map(f, w,
+                 {"name", "camera_to_world", "scan_direction", "travel_scale", "accel_to_camera"});
+    FaceGeometry g;
+    g.name = y.string(y.require(f, w, "name"), w + ".name");
+    g.T_world_camera = y.isometry(y.require(f, w, "camera_to_world"), w + ".camera_to_world");
+    const YAML::Node d = y.require(f, w, "scan_direction");
+    const auto v = y.numbers(d, w + ".scan_direction", 3);
+    g.scan_direction = Eigen::Vector3d(v[0], v[1], v[2]);
+    if (std::abs(g.scan_direction.norm() - 1.0) > 1e-6)
+        y.fail(d, w + ".scan_direction: must be a unit vector");
+    g.travel_scale = positive(y, f, w, "travel_scale");
+    g.R_camera_accel = y.rotation(y.require(f, w, "accel_to_camera"), w + ".accel_to_camera");
+    return g;
+}
+
+// The shortest text that reads back as the same double.
+std::string num(double v) {
+    char buf[32];
+    const auto r = std::to_chars(buf, buf + sizeof buf, v);
+    return std::string(buf, r.ptr);
+}
+
+void write_matrix(std::ostream& o, const Eigen::MatrixXd& m) {
+    o << '[';
+    for (Eigen::Index r = 0; r < m.rows(); ++r) {
+        o << (r ? ", [" : "[");
+        for (Eigen::Index c = 0; c < m.cols(); ++c) o << (c ? ", " : "") << num(m(r, c));
+        o << ']';
+    }
+    o << ']';
+}
+
+void write_vector(std::ostream& o, const Eigen::Vector3d& v) {
+    o << '[' << num(v.x()) << ", " << num(v.y()) << ", " << num(v.z()) << ']';
+}
+
+// A string as a YAML double-quoted scalar.
+std::string quoted(const std::string& s) {
+    std::string q = "\"";
+    for (const char ch : s) {
+        if (ch == '"' || ch == '\\') q += '\\';
+        q += ch;
+    }
+    return q + '"';
+}
+
+}  // namespace
+
+const FaceGeometry* Calibration::face(const std::string& name) const {
+    for (const auto& f : faces)
+        if (f.name == name) return &f;
+    return nullptr;
+}
+
+core::Result<Calibration> read_calibration(const std::filesystem::path& file) {
+    const YamlReader y(file.string());
+    return y.guarded<Calibration>([&] {
+        const YAML::Node root = y.load();
+        const std::string w = "calibration";
+        y.expect_map(root, w,
+                     {"format", "calibrated_at", "method", "source", "residuals", "sensor",
+                      "clock_offset_ns", "accel_bias_mps2", "faces"});
+        const std::string format = y.string(y.require(root, w, "format"), "format");
+        if (format != kFormat)
+            y.fail(root["format"], "format: '" + format + "', expected " + kFormat);
+        Calibration c;
+        c.calibrated_at = y.string(y.require(root, w, "calibrated_at"), "calibrated_at");
+        c.method = y.string(y.require(root, w, "method"), "method");
+        c.source = y.string(y.require(root, w, "source"), "source");
+        if (const YAML::Node r = root["residuals"]) {
+            if (!r.IsMap()) y.fail(r, "residuals: expected a mapping");
+            for (const auto& kv : r)
+                c.residuals[kv.first.as<std::string>()] =
+                    y.number(kv.second, "residuals." + kv.first.as<std::string>());
+        }
+        c.sensor = read_sensor(y, y.require(root, w, "sensor"));
+        c.clock_offset_ns = y.integer(y.require(root, w, "clock_offset_ns"), "clock_offset_ns");
+        const auto b = y.numbers(y.require(root, w, "accel_bias_mps2"), "accel_bias_mps2", 3);
+        c.accel_bias_mps2 = Eigen::Vector3d(b[0], b[1], b[2]);
+        const YAML::Node faces = y.require(root, w, "faces");
+        if (!faces.IsSequence() || faces.size() == 0)
+            y.fail(faces, "faces: expected a non-empty list");
+        for (std::size_t i = 0; i < faces.size(); ++i) {
+            const std::string wf = "faces[" + std::to_string(i) + "]";
+            FaceGeometry g = read_face(y, faces[i], wf);
+            if (c.face(g.name)) y.fail(faces[i], wf + ".name: duplicate face '" + g.name + "'");
+            c.faces.push_back(std::move(g));
+        }
+        return c;
+    });
+}
+
+core::Result<void> write_calibration(const Calibration& c, const std::filesystem::path& file) {
+    std::ostringstream o;
+    o << "# The cell's measured geometry (docs/calibration.md).\n"
+      << "format: " << kFormat << '\n'
+      << "calibrated_at: " << quoted(c.calibrated_at) << '\n'
+      << "method: " << quoted(c.method) << '\n'
+      << "source: " << quoted(c.source) << '\n'
+      << "residuals: {";
+    bool first = true;
+    for (const auto& [key, value] : c.residuals) {
+        o << (first ? "" : ", ") << quoted(key) << ": " << num(value);
+        first = false;
+    }
+    const SensorModel& s = c.sensor;
+    o << "}\nsensor: {model: direct_beam, width: " << s.width << ", pitch_mm: " << num(s.pitch_mm)
+      << ", standoff_mm: " << num(s.standoff_mm) << ", min_range_mm: " << num(s.min_range_mm)
+      << ", max_range_mm: " << num(s.max_range_mm) << ", baseline_mm: " << num(s.baseline_mm)
+      << "}\n"
+      << "clock_offset_ns: " << c.clock_offset_ns << '\n'
+      << "accel_bias_mps2: ";
+    write_vector(o, c.accel_bias_mps2);
+    o << "\nfaces:\n";
+    for (const auto& f : c.faces) {
+        o << "  - name: " << quoted(f.name) << "\n    camera_to_world: ";
+        write_matrix(o, f.T_world_camera.matrix());
+        o << "\n    scan_direction: ";
+        write_vector(o, f.scan_direction);
+        o << "\n    travel_scale: " << num(f.travel_scale) << "\n    accel_to_camera: ";
+        write_matrix(o, f.R_camera_accel);
+        o << '\n';
+    }
+    std::ofstream out(file);
+    if (!out) return core::make_error(file.string() + ": cannot write");
+    out << o.str();
+    out.close();
+    if (!out) return core::make_error(file.string() + ": write failed");
+    return {};
+}
+
+core::Result<void> apply_geometry(const Calibration& c, const std::string& calibration_file,
+                                  core::Recording& recording) {
+    for (const auto& f : recording.faces)
+        if (!c.face(f.name))
+            return core::make_error(calibration_file + ": no face '" + f.name +
+                                    "' (the recording has it)");
+    for (auto& f : recording.faces) {
+        const FaceGeometry& g = *c.face(f.name);
+        f.T_world_camera = g.T_world_camera;
+        f.scan_direction = g.scan_direction;
+        f.R_camera_accel = g.R_camera_accel;
+        for (double& p : f.profile_positions_mm) p *= g.travel_scale;
+    }
+    return {};
+}
+
+core::Result<acquire::Triangulation> triangulation(const SensorModel& s, int height_px) {
+    acquire::DirectBeamDesign d;
+    d.standoff_mm = s.standoff_mm;
+    d.pitch_mm = s.pitch_mm;
+    d.min_range_mm = s.min_range_mm;
+    d.max_range_mm = s.max_range_mm;
+    d.baseline_mm = s.baseline_mm;
+    d.width_px = s.width;
+    d.height_px = height_px;
+    auto params = acquire::design_direct_beam(d);
+    if (!params) return params.error();
+    return acquire::Triangulation::direct_beam(*params);
+}
+
+}  // namespace hotgauge::calib

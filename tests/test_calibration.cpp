@@ -1,0 +1,191 @@
+// calib: calibration.yaml read back to the same numbers it was written with, every malformed
+// field refused with file:line and the key, the shipped config/calibration.yaml equal to the
+// nominal geometry of config/cell.yaml (the virtual cell before commissioning), and the
+// triangulation built from the sensor model the same as the simulator's.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "hotgauge/calib/calibration.hpp"
+#include "hotgauge/sim/simulator.hpp"
+#include "hotgauge/vcell/render.hpp"
+#include "temp_dir.hpp"
+
+namespace calib = hotgauge::calib;
+namespace sim = hotgauge::sim;
+namespace vcell = hotgauge::vcell;
+
+namespace {
+
+const std::string kConfig = HOTGAUGE_SOURCE_DIR "/config";
+
+calib::Calibration example() {
+    calib::Calibration c;
+    c.calibrated_at = "2026-12-02T06:00:00Z";
+    c.method = "artifact";
+    c.source = "spheres \"A\" v2";
+    c.residuals = {{"sphere_rms_mm", 0.0031}, {"scale_ppm", -12.5}};
+    c.sensor.baseline_mm = 301.25;
+    c.clock_offset_ns = -1'234'567;
+    c.accel_bias_mps2 = {0.01, -0.002, 0.0071};
+    for (const char* name : {"top", "side1"}) {
+        calib::FaceGeometry g;
+        g.name = name;
+        g.T_world_camera = Eigen::Translation3d(1.0 / 3.0, -120.0, 930.0) *
+                           Eigen::AngleAxisd(0.1234, Eigen::Vector3d(1, 2, 3).normalized());
+        g.scan_direction = Eigen::Vector3d(0.001, 1.0, -0.0003).normalized();
+        g.travel_scale = 1.0 + 1.0 / 7.0 * 1e-3;
+        g.R_camera_accel = Eigen::AngleAxisd(0.05, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+        c.faces.push_back(g);
+    }
+    return c;
+}
+
+std::string text_of(const std::filesystem::path& p) {
+    std::ifstream in(p);
+    std::stringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+// The error reading `text` with `from` replaced by `to` ("" when it reads).
+std::string error_with(const std::string& from, const std::string& to) {
+    hotgauge::test::TempDir tmp;
+    const auto good = tmp.path / "good.yaml";
+    EXPECT_TRUE(calib::write_calibration(example(), good).ok());
+    std::string text = text_of(good);
+    const auto at = text.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    if (at != std::string::npos) text.replace(at, from.size(), to);
+    const auto bad = tmp.path / "bad.yaml";
+    std::ofstream(bad) << text;
+    auto c = calib::read_calibration(bad);
+    return c.ok() ? "" : c.error().message;
+}
+
+}  // namespace
+
+TEST(Calibration, ReadsBackWhatWasWritten) {
+    hotgauge::test::TempDir tmp;
+    const calib::Calibration c = example();
+    ASSERT_TRUE(calib::write_calibration(c, tmp.path / "calibration.yaml").ok());
+    auto r = calib::read_calibration(tmp.path / "calibration.yaml");
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    EXPECT_EQ(r->calibrated_at, c.calibrated_at);
+    EXPECT_EQ(r->method, c.method);
+    EXPECT_EQ(r->source, c.source);
+    EXPECT_EQ(r->residuals, c.residuals);
+    EXPECT_EQ(r->sensor.baseline_mm, c.sensor.baseline_mm);
+    EXPECT_EQ(r->clock_offset_ns, c.clock_offset_ns);
+    EXPECT_EQ(r->accel_bias_mps2, c.accel_bias_mps2);
+    ASSERT_EQ(r->faces.size(), 2u);
+    for (std::size_t i = 0; i < 2; ++i) {
+        EXPECT_EQ(r->faces[i].name, c.faces[i].name);
+        EXPECT_EQ(r->faces[i].T_world_camera.matrix(), c.faces[i].T_world_camera.matrix());
+        EXPECT_EQ(r->faces[i].scan_direction, c.faces[i].scan_direction);
+        EXPECT_EQ(r->faces[i].travel_scale, c.faces[i].travel_scale);
+        EXPECT_EQ(r->faces[i].R_camera_accel, c.faces[i].R_camera_accel);
+    }
+    EXPECT_TRUE(r->measured());
+    EXPECT_NE(r->face("side1"), nullptr);
+    EXPECT_EQ(r->face("bottom"), nullptr);
+}
+
+TEST(Calibration, BadFieldsAreRefusedByName) {
+    EXPECT_EQ(error_with("method:", "method:"), "");
+    const struct {
+        std::string from, to, expect;
+    } cases[] = {
+        {"format: hotgauge-calibration-1", "format: hotgauge-calibration-9", "format:"},
+        {"clock_offset_ns:", "clock_offset_ms:", "clock_offset_ms"},
+        {"model: direct_beam", "model: pinhole", "sensor.model"},
+        {"min_range_mm: 600", "min_range_mm: 1300", "min_range_mm must be below"},
+        {"travel_scale: ", "travel_scale: -", "faces[0].travel_scale: must be positive"},
+        {"scan_direction: [0.000", "scan_direction: [2.000",
+         "faces[0].scan_direction: must be a unit"},
+        {"- name: \"side1\"", "- name: \"top\"", "faces[1].name: duplicate face 'top'"},
+        {"accel_to_camera: [[", "accel_to_camera: [[-", "faces[0].accel_to_camera"},
+        {"baseline_mm: 301.25", "baseline_mm: x", "sensor.baseline_mm"},
+    };
+    for (const auto& k : cases) {
+        const std::string e = error_with(k.from, k.to);
+        EXPECT_NE(e.find("bad.yaml:"), std::string::npos) << k.from << " → " << e;
+        EXPECT_NE(e.find(k.expect), std::string::npos) << k.from << " → " << e;
+    }
+    auto missing = calib::read_calibration("/nonexistent/calibration.yaml");
+    ASSERT_FALSE(missing.ok());
+    EXPECT_NE(missing.error().message.find("/nonexistent/calibration.yaml"), std::string::npos);
+}
+
+// The shipped calibration is what `hotgauge calibrate nominal` makes of config/cell.yaml: if one
+// of the two files changes alone, the daemon would scan with other poses than the virtual cell
+// renders.
+TEST(Calibration, ShippedNominalMatchesTheCellConfig) {
+    auto cell = sim::read_cell_config(kConfig + "/cell.yaml");
+    ASSERT_TRUE(cell.ok()) << cell.error().message;
+    auto shipped = calib::read_calibration(kConfig + "/calibration.yaml");
+    ASSERT_TRUE(shipped.ok()) << shipped.error().message;
+    EXPECT_FALSE(shipped->measured());
+    const auto nominal = vcell::nominal_calibration(*cell, "config/cell.yaml", "now");
+    ASSERT_EQ(shipped->faces.size(), nominal.faces.size());
+    for (std::size_t i = 0; i < nominal.faces.size(); ++i) {
+        const auto& a = shipped->faces[i];
+        const auto& b = nominal.faces[i];
+        EXPECT_EQ(a.name, b.name);
+        EXPECT_TRUE(a.T_world_camera.matrix().isApprox(b.T_world_camera.matrix(), 1e-12)) << a.name;
+        EXPECT_TRUE(a.scan_direction.isApprox(b.scan_direction, 1e-12)) << a.name;
+        EXPECT_TRUE(a.R_camera_accel.isApprox(b.R_camera_accel, 1e-12)) << a.name;
+        EXPECT_EQ(a.travel_scale, 1.0);
+    }
+    EXPECT_EQ(shipped->sensor.width, nominal.sensor.width);
+    EXPECT_EQ(shipped->sensor.baseline_mm, nominal.sensor.baseline_mm);
+    EXPECT_EQ(shipped->sensor.standoff_mm, nominal.sensor.standoff_mm);
+}
+
+// The daemon's triangulation (from the calibration) and the virtual camera's (from the cell
+// config) map every pixel to the same point.
+TEST(Calibration, TriangulationMatchesTheSimulatorsSensor) {
+    auto cell = sim::read_cell_config(kConfig + "/cell.yaml");
+    ASSERT_TRUE(cell.ok());
+    const auto nominal = vcell::nominal_calibration(*cell, "cell.yaml", "now");
+    auto a = calib::triangulation(nominal.sensor);
+    auto b = vcell::sensor_triangulation(cell->sensor);
+    ASSERT_TRUE(a.ok() && b.ok());
+    for (double u : {0.0, 700.5, 2047.0})
+        for (double v : {10.25, 544.0, 1000.75}) {
+            const auto pa = a->to_camera(u, v);
+            const auto pb = b->to_camera(u, v);
+            EXPECT_EQ(pa.x_mm, pb.x_mm);
+            EXPECT_EQ(pa.z_mm, pb.z_mm);
+        }
+    calib::SensorModel bad = nominal.sensor;
+    bad.baseline_mm = 0.0;
+    EXPECT_FALSE(calib::triangulation(bad).ok());
+}
+
+// A recording takes the calibration's geometry face by face; a face the calibration lacks is an
+// error naming it, and the recording is left as it was.
+TEST(Calibration, ApplyGeometryReplacesFaceYamlAndScalesTheTravel) {
+    const calib::Calibration c = example();
+    hotgauge::core::Recording rec;
+    hotgauge::core::FaceScan f;
+    f.name = "side1";
+    f.profile_positions_mm = {0.0, 0.2, 100.0};
+    rec.faces.push_back(f);
+    ASSERT_TRUE(calib::apply_geometry(c, "cal.yaml", rec).ok());
+    const auto& g = *c.face("side1");
+    EXPECT_EQ(rec.faces[0].T_world_camera.matrix(), g.T_world_camera.matrix());
+    EXPECT_EQ(rec.faces[0].scan_direction, g.scan_direction);
+    EXPECT_EQ(rec.faces[0].R_camera_accel, g.R_camera_accel);
+    EXPECT_DOUBLE_EQ(rec.faces[0].profile_positions_mm[2], 100.0 * g.travel_scale);
+
+    f.name = "bottom";
+    rec.faces.push_back(f);
+    const auto before = rec.faces[0].profile_positions_mm;
+    auto e = calib::apply_geometry(c, "cal.yaml", rec);
+    ASSERT_FALSE(e.ok());
+    EXPECT_EQ(e.error().message, "cal.yaml: no face 'bottom' (the recording has it)");
+    EXPECT_EQ(rec.faces[0].profile_positions_mm, before);
+    EXPECT_TRUE(rec.faces[1].T_world_camera.matrix().isIdentity());
+}
