@@ -1,0 +1,163 @@
+#include "hotgauge/calib/hand_eye.hpp"
+
+#include <cmath>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/eigen.hpp>
+
+namespace hotgauge::calib {
+namespace {
+
+constexpr double kMinAxisSpreadDeg = 5.0;
+
+// Whether the relative motions between poses turn about two directions at least
+// kMinAxisSpreadDeg apart (with one direction only, X's translation along it is not determined).
+bool motions_turn_about_two_axes(std::span<const HandEyeSample> s) {
+    std::vector<Eigen::Vector3d> axes;
+    for (std::size_t i = 1; i < s.size(); ++i) {
+        const Eigen::AngleAxisd a(
+            (s[0].T_base_flange.linear().transpose() * s[i].T_base_flange.linear()));
+        if (a.angle() > 1e-3) axes.push_back(a.axis());
+    }
+    const double min_sin = std::sin(kMinAxisSpreadDeg * M_PI / 180.0);
+    for (std::size_t i = 0; i < axes.size(); ++i)
+        for (std::size_t j = i + 1; j < axes.size(); ++j)
+            if (axes[i].cross(axes[j]).norm() > min_sin) return true;
+    return false;
+}
+
+// RMS spread of the target's pose in the base frame through every sample.
+void residuals(std::span<const HandEyeSample> s, HandEyeSolution& x) {
+    std::vector<Eigen::Isometry3d> t;
+    Eigen::Vector3d mean_t = Eigen::Vector3d::Zero();
+    for (const auto& k : s) {
+        t.push_back(k.T_base_flange * x.T_flange_camera * k.T_camera_target);
+        mean_t += t.back().translation();
+    }
+    mean_t /= static_cast<double>(t.size());
+    // The mean rotation: the chordal mean (the SVD projection of the summed matrices).
+    Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+    for (const auto& p : t) sum += p.linear();
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d mean_r = svd.matrixU() * svd.matrixV().transpose();
+    if (mean_r.determinant() < 0) {
+        Eigen::Matrix3d flip = Eigen::Matrix3d::Identity();
+        flip(2, 2) = -1;
+        mean_r = svd.matrixU() * flip * svd.matrixV().transpose();
+    }
+    double r2 = 0, t2 = 0;
+    for (const auto& p : t) {
+        const double deg = Eigen::AngleAxisd(mean_r.transpose() * p.linear()).angle() * 180 / M_PI;
+        r2 += deg * deg;
+        t2 += (p.translation() - mean_t).squaredNorm();
+    }
+    x.rotation_rms_deg = std::sqrt(r2 / static_cast<double>(t.size()));
+    x.translation_rms_mm = std::sqrt(t2 / static_cast<double>(t.size()));
+}
+
+Eigen::Isometry3d exp_se3(const Eigen::Matrix<double, 6, 1>& d) {
+    Eigen::Isometry3d p = Eigen::Isometry3d::Identity();
+    const Eigen::Vector3d w = d.head<3>();
+    if (w.norm() > 0) p.linear() = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
+    p.translation() = d.tail<3>();
+    return p;
+}
+
+// Per sample: how far T_base_flange·X·T_camera_target is from the target's base pose Z, the
+// rotation as a rotation vector times `lever_mm` (its effect at the target's distance) and the
+// translation in mm.
+Eigen::VectorXd pose_errors(std::span<const HandEyeSample> s, const Eigen::Isometry3d& X,
+                            const Eigen::Isometry3d& Z, double lever_mm) {
+    Eigen::VectorXd r(6 * static_cast<Eigen::Index>(s.size()));
+    for (std::size_t i = 0; i < s.size(); ++i) {
+        const Eigen::Isometry3d e = Z.inverse() * s[i].T_base_flange * X * s[i].T_camera_target;
+        const Eigen::AngleAxisd a(e.linear());
+        const auto k = static_cast<Eigen::Index>(6 * i);
+        r.segment<3>(k) = a.axis() * a.angle() * lever_mm;
+        r.segment<3>(k + 3) = e.translation();
+    }
+    return r;
+}
+
+// The closed-form X refined jointly with the target's base pose Z by Gauss–Newton on every
+// sample's pose error (the closed forms solve rotation first and translation from it, so the
+// rotation's error reaches the translation through the robot's lever arms).
+Eigen::Isometry3d refine(std::span<const HandEyeSample> s, Eigen::Isometry3d X) {
+    double lever = 0;
+    for (const auto& k : s) lever += k.T_camera_target.translation().norm();
+    lever /= static_cast<double>(s.size());
+    Eigen::Isometry3d Z = s[0].T_base_flange * X * s[0].T_camera_target;
+    for (int iteration = 0; iteration < 20; ++iteration) {
+        const Eigen::VectorXd r0 = pose_errors(s, X, Z, lever);
+        Eigen::MatrixXd J(r0.size(), 12);
+        for (int p = 0; p < 12; ++p) {
+            Eigen::Matrix<double, 6, 1> d = Eigen::Matrix<double, 6, 1>::Zero();
+            const double h = p % 6 < 3 ? 1e-7 : 1e-5;
+            d(p % 6) = h;
+            const Eigen::VectorXd r = p < 6 ? pose_errors(s, X * exp_se3(d), Z, lever)
+                                            : pose_errors(s, X, Z * exp_se3(d), lever);
+            J.col(p) = (r - r0) / h;
+        }
+        const Eigen::VectorXd step = J.colPivHouseholderQr().solve(-r0);
+        X = X * exp_se3(step.head<6>());
+        Z = Z * exp_se3(step.tail<6>());
+        if (step.norm() < 1e-10) break;
+    }
+    return X;
+}
+
+cv::Mat to_cv(const Eigen::MatrixXd& m) {
+    cv::Mat out;
+    cv::eigen2cv(m, out);
+    return out;
+}
+
+}  // namespace
+
+core::Result<std::vector<HandEyeSolution>> solve_hand_eye(std::span<const HandEyeSample> samples) {
+    if (samples.size() < 3)
+        return core::make_error("hand-eye: too few poses: " + std::to_string(samples.size()) +
+                                ", need at least 3");
+    if (!motions_turn_about_two_axes(samples))
+        return core::make_error(
+            "hand-eye: the robot's motions between the " + std::to_string(samples.size()) +
+            " poses turn about one direction only: turn the head about two axes at least " +
+            std::to_string(static_cast<int>(kMinAxisSpreadDeg)) + "° apart");
+    std::vector<cv::Mat> r_bf, t_bf, r_ct, t_ct;
+    for (const auto& s : samples) {
+        r_bf.push_back(to_cv(s.T_base_flange.linear()));
+        t_bf.push_back(to_cv(s.T_base_flange.translation()));
+        r_ct.push_back(to_cv(s.T_camera_target.linear()));
+        t_ct.push_back(to_cv(s.T_camera_target.translation()));
+    }
+    const std::pair<std::string, cv::HandEyeCalibrationMethod> methods[] = {
+        {"Tsai", cv::CALIB_HAND_EYE_TSAI},
+        {"Park", cv::CALIB_HAND_EYE_PARK},
+        {"Daniilidis", cv::CALIB_HAND_EYE_DANIILIDIS}};
+    std::vector<HandEyeSolution> out;
+    for (const auto& [name, method] : methods) {
+        cv::Mat r, t;
+        try {
+            cv::calibrateHandEye(r_bf, t_bf, r_ct, t_ct, r, t, method);
+        } catch (const cv::Exception& e) {
+            return core::make_error("hand-eye (" + name + "): " + e.what());
+        }
+        Eigen::Matrix3d re;
+        Eigen::Vector3d te;
+        cv::cv2eigen(r, re);
+        cv::cv2eigen(t, te);
+        HandEyeSolution x;
+        x.method = name;
+        x.T_flange_camera.linear() = re;
+        x.T_flange_camera.translation() = te;
+        residuals(samples, x);
+        out.push_back(x);
+    }
+    HandEyeSolution best = out[1];  // Park: the refinement's start
+    best.method = "Park+refined";
+    best.T_flange_camera = refine(samples, best.T_flange_camera);
+    residuals(samples, best);
+    out.push_back(best);
+    return out;
+}
+
+}  // namespace hotgauge::calib
