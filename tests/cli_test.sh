@@ -81,7 +81,7 @@ PY
   --calibration "$src/config/calibration.yaml" > "$tmp/cal.json" 2> "$tmp/cal.err" \
   || fail "measure --calibration"
 grep -q "method nominal: design geometry, not measured" "$tmp/cal.err" || fail "no nominal warning"
-sed 's/travel_scale: 1$/travel_scale: 1.002/' "$src/config/calibration.yaml" > "$tmp/scaled.yaml"
+sed 's/travel_scale: 1.0$/travel_scale: 1.002/' "$src/config/calibration.yaml" > "$tmp/scaled.yaml"
 "$bin" measure "$tmp/rec" --json --part-pose "$tmp/pose.yaml" --calibration "$tmp/scaled.yaml" \
   > "$tmp/scaled.json" 2> /dev/null || fail "measure --calibration scaled"
 /usr/bin/python3 - "$tmp/m.json" "$tmp/cal.json" "$tmp/scaled.json" <<'PY' || fail "--calibration"

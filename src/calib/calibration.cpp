@@ -1,11 +1,9 @@
 #include "hotgauge/calib/calibration.hpp"
 
-#include <charconv>
 #include <cmath>
-#include <fstream>
-#include <sstream>
 
 #include "hotgauge/io/yaml_reader.hpp"
+#include "hotgauge/io/yaml_writer.hpp"
 
 namespace hotgauge::calib {
 namespace {
@@ -58,35 +56,14 @@ FaceGeometry read_face(const YamlReader& y, const YAML::Node& f, const std::stri
     return g;
 }
 
-// The shortest text that reads back as the same double.
-std::string num(double v) {
-    char buf[32];
-    const auto r = std::to_chars(buf, buf + sizeof buf, v);
-    return std::string(buf, r.ptr);
-}
-
-void write_matrix(std::ostream& o, const Eigen::MatrixXd& m) {
-    o << '[';
+// A matrix as a flow sequence of rows.
+std::string fmt_matrix(const Eigen::MatrixXd& m) {
+    std::string out = "[";
     for (Eigen::Index r = 0; r < m.rows(); ++r) {
-        o << (r ? ", [" : "[");
-        for (Eigen::Index c = 0; c < m.cols(); ++c) o << (c ? ", " : "") << num(m(r, c));
-        o << ']';
+        const Eigen::RowVectorXd row = m.row(r);
+        out += (r ? ", " : "") + io::fmt_row(row.data(), static_cast<int>(row.size()));
     }
-    o << ']';
-}
-
-void write_vector(std::ostream& o, const Eigen::Vector3d& v) {
-    o << '[' << num(v.x()) << ", " << num(v.y()) << ", " << num(v.z()) << ']';
-}
-
-// A string as a YAML double-quoted scalar.
-std::string quoted(const std::string& s) {
-    std::string q = "\"";
-    for (const char ch : s) {
-        if (ch == '"' || ch == '\\') q += '\\';
-        q += ch;
-    }
-    return q + '"';
+    return out + "]";
 }
 
 }  // namespace
@@ -136,42 +113,30 @@ core::Result<Calibration> read_calibration(const std::filesystem::path& file) {
 }
 
 core::Result<void> write_calibration(const Calibration& c, const std::filesystem::path& file) {
-    std::ostringstream o;
-    o << "# The cell's measured geometry (docs/calibration.md).\n"
-      << "format: " << kFormat << '\n'
-      << "calibrated_at: " << quoted(c.calibrated_at) << '\n'
-      << "method: " << quoted(c.method) << '\n'
-      << "source: " << quoted(c.source) << '\n'
-      << "residuals: {";
+    using io::fmt_double, io::fmt_row, io::quote;
+    std::string y = "# The cell's measured geometry (docs/calibration.md).\n";
+    y += std::string("format: ") + kFormat + "\ncalibrated_at: " + quote(c.calibrated_at) +
+         "\nmethod: " + quote(c.method) + "\nsource: " + quote(c.source) + "\nresiduals: {";
     bool first = true;
     for (const auto& [key, value] : c.residuals) {
-        o << (first ? "" : ", ") << quoted(key) << ": " << num(value);
+        y += (first ? "" : ", ") + quote(key) + ": " + fmt_double(value);
         first = false;
     }
     const SensorModel& s = c.sensor;
-    o << "}\nsensor: {model: direct_beam, width: " << s.width << ", pitch_mm: " << num(s.pitch_mm)
-      << ", standoff_mm: " << num(s.standoff_mm) << ", min_range_mm: " << num(s.min_range_mm)
-      << ", max_range_mm: " << num(s.max_range_mm) << ", baseline_mm: " << num(s.baseline_mm)
-      << "}\n"
-      << "clock_offset_ns: " << c.clock_offset_ns << '\n'
-      << "accel_bias_mps2: ";
-    write_vector(o, c.accel_bias_mps2);
-    o << "\nfaces:\n";
-    for (const auto& f : c.faces) {
-        o << "  - name: " << quoted(f.name) << "\n    camera_to_world: ";
-        write_matrix(o, f.T_world_camera.matrix());
-        o << "\n    scan_direction: ";
-        write_vector(o, f.scan_direction);
-        o << "\n    travel_scale: " << num(f.travel_scale) << "\n    accel_to_camera: ";
-        write_matrix(o, f.R_camera_accel);
-        o << '\n';
-    }
-    std::ofstream out(file);
-    if (!out) return core::make_error(file.string() + ": cannot write");
-    out << o.str();
-    out.close();
-    if (!out) return core::make_error(file.string() + ": write failed");
-    return {};
+    y += "}\nsensor: {model: direct_beam, width: " + std::to_string(s.width) +
+         ", pitch_mm: " + fmt_double(s.pitch_mm) + ", standoff_mm: " + fmt_double(s.standoff_mm) +
+         ", min_range_mm: " + fmt_double(s.min_range_mm) +
+         ", max_range_mm: " + fmt_double(s.max_range_mm) +
+         ", baseline_mm: " + fmt_double(s.baseline_mm) + "}\n";
+    y += "clock_offset_ns: " + std::to_string(c.clock_offset_ns) +
+         "\naccel_bias_mps2: " + fmt_row(c.accel_bias_mps2.data(), 3) + "\nfaces:\n";
+    for (const auto& f : c.faces)
+        y += "  - name: " + quote(f.name) +
+             "\n    camera_to_world: " + fmt_matrix(f.T_world_camera.matrix()) +
+             "\n    scan_direction: " + fmt_row(f.scan_direction.data(), 3) +
+             "\n    travel_scale: " + fmt_double(f.travel_scale) +
+             "\n    accel_to_camera: " + fmt_matrix(f.R_camera_accel) + "\n";
+    return io::write_text(file, y);
 }
 
 core::Result<void> apply_geometry(const Calibration& c, const std::string& calibration_file,

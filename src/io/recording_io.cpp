@@ -19,6 +19,7 @@
 
 #include "hotgauge/core/geometry.hpp"
 #include "hotgauge/io/npy.hpp"
+#include "hotgauge/io/yaml_writer.hpp"
 
 namespace hotgauge::io {
 namespace {
@@ -374,54 +375,6 @@ Result<Recording> read_recording_impl(const fs::path& dir) {
 }
 
 // ---- Writing. ----
-
-// Shortest text that reads back to the same double (std::to_chars round-trip guarantee), with a
-// '.' so that YAML 1.1 readers (PyYAML) also see a float: 1 -> "1.0", 1e-05 -> "1.0e-05".
-std::string fmt_double(double v) {
-    char buf[64];
-    const auto res = std::to_chars(buf, buf + sizeof buf, v);
-    std::string s(buf, res.ptr);
-    if (s.find_first_of(".ne") == std::string::npos) {  // n: nan/inf never reach here
-        s += ".0";
-    } else if (const auto e = s.find('e');
-               e != std::string::npos && s.find('.') == std::string::npos) {
-        s.insert(e, ".0");
-    }
-    return s;
-}
-
-// A YAML double-quoted scalar.
-std::string quote(const std::string& s) {
-    std::string out = "\"";
-    for (unsigned char c : s) {
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += static_cast<char>(c);
-        } else if (c < 0x20 || c == 0x7f) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\x%02x", c);
-            out += buf;
-        } else {
-            out += static_cast<char>(c);
-        }
-    }
-    return out + "\"";
-}
-
-std::string fmt_row(const double* v, int n) {
-    std::string s = "[";
-    for (int i = 0; i < n; ++i) s += (i ? ", " : "") + fmt_double(v[i]);
-    return s + "]";
-}
-
-Result<void> write_text(const fs::path& path, const std::string& text) {
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    if (!out) return make_error(where(path) + "cannot open for writing");
-    out << text;
-    out.close();
-    if (!out) return make_error(where(path) + "write failed");
-    return {};
-}
 
 Result<void> validate(const Recording& rec, const fs::path& dir) {
     const fs::path py = dir / "part.yaml";
