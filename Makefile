@@ -46,7 +46,7 @@ build-asan: deps $(BUILD_ASAN)/CMakeCache.txt
 # press vibration; the paper's Table 2 is printed beside the measured values and their errors.
 DEMO_OUT ?= out/line
 demo: build
-	/usr/bin/python3 tests/virtual_line.py --bin-dir $(BUILD) --parts 12 --out $(DEMO_OUT)
+	/usr/bin/python3 tests/virtual_line.py --bin-dir $(BUILD) --parts 12 --commission 1 --out $(DEMO_OUT)
 
 test: build build-asan
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)

@@ -8,6 +8,8 @@
 #include <sstream>
 
 #include "hotgauge/calib/calibration.hpp"
+#include "hotgauge/io/recording_io.hpp"
+#include "hotgauge/sim/geometry.hpp"
 #include "hotgauge/sim/simulator.hpp"
 #include "hotgauge/vcell/render.hpp"
 #include "temp_dir.hpp"
@@ -127,7 +129,7 @@ TEST(Calibration, ShippedNominalMatchesTheCellConfig) {
     auto shipped = calib::read_calibration(kConfig + "/calibration.yaml");
     ASSERT_TRUE(shipped.ok()) << shipped.error().message;
     EXPECT_FALSE(shipped->measured());
-    const auto nominal = vcell::nominal_calibration(*cell, "config/cell.yaml", "now");
+    const auto nominal = sim::nominal_calibration(*cell, "config/cell.yaml", "now");
     ASSERT_EQ(shipped->faces.size(), nominal.faces.size());
     for (std::size_t i = 0; i < nominal.faces.size(); ++i) {
         const auto& a = shipped->faces[i];
@@ -148,7 +150,7 @@ TEST(Calibration, ShippedNominalMatchesTheCellConfig) {
 TEST(Calibration, TriangulationMatchesTheSimulatorsSensor) {
     auto cell = sim::read_cell_config(kConfig + "/cell.yaml");
     ASSERT_TRUE(cell.ok());
-    const auto nominal = vcell::nominal_calibration(*cell, "cell.yaml", "now");
+    const auto nominal = sim::nominal_calibration(*cell, "cell.yaml", "now");
     auto a = calib::triangulation(nominal.sensor);
     auto b = vcell::sensor_triangulation(cell->sensor);
     ASSERT_TRUE(a.ok() && b.ok());
@@ -188,4 +190,49 @@ TEST(Calibration, ApplyGeometryReplacesFaceYamlAndScalesTheTravel) {
     EXPECT_EQ(e.error().message, "cal.yaml: no face 'bottom' (the recording has it)");
     EXPECT_EQ(rec.faces[0].profile_positions_mm, before);
     EXPECT_TRUE(rec.faces[1].T_world_camera.matrix().isIdentity());
+}
+
+// What the capture already applied (face.yaml's travel_scale and clock_offset_ns) is replaced,
+// not applied twice: measured again with the calibration it was recorded with, a recording is
+// unchanged; with another, positions and times move by the difference. The keys survive the
+// recording writer and reader.
+TEST(Calibration, ApplyGeometryReplacesWhatTheCaptureApplied) {
+    const calib::Calibration c = example();
+    const auto& g = *c.face("top");
+    hotgauge::core::Recording rec;
+    rec.part_id = "P1";
+    rec.recipe = "hub-a";
+    rec.captured_at = "2026-12-02T06:00:00Z";
+    hotgauge::core::FaceScan f;
+    f.name = "top";
+    f.width = 1;
+    f.profiles_mm = {1.0f, 900.0f, 2.0f, 901.0f};
+    f.profile_times_ns = {1'000'000'000, 1'001'000'000};
+    f.profile_positions_mm = {0.0, 100.0 * g.travel_scale};
+    f.accel_mps2 = {0, 0, 9.81f, 0, 0, 9.81f};
+    f.accel_times_ns = {999'000'000, 1'002'000'000};
+    f.travel_scale = g.travel_scale;
+    f.clock_offset_ns = c.clock_offset_ns;
+    rec.faces.push_back(f);
+    hotgauge::test::TempDir dir;
+    ASSERT_TRUE(hotgauge::io::write_recording(rec, dir.path / "rec").ok());
+    auto back = hotgauge::io::read_recording(dir.path / "rec");
+    ASSERT_TRUE(back.ok()) << back.error().message;
+    EXPECT_EQ(back->faces[0].travel_scale, g.travel_scale);
+    EXPECT_EQ(back->faces[0].clock_offset_ns, c.clock_offset_ns);
+
+    hotgauge::core::Recording same = *back;
+    ASSERT_TRUE(calib::apply_geometry(c, "cal.yaml", same).ok());
+    EXPECT_DOUBLE_EQ(same.faces[0].profile_positions_mm[1], 100.0 * g.travel_scale);
+    EXPECT_EQ(same.faces[0].profile_times_ns, f.profile_times_ns);
+
+    calib::Calibration other = c;
+    for (auto& face : other.faces) face.travel_scale = 1.0;
+    other.clock_offset_ns = 0;
+    ASSERT_TRUE(calib::apply_geometry(other, "other.yaml", same).ok());
+    EXPECT_DOUBLE_EQ(same.faces[0].profile_positions_mm[1], 100.0);
+    EXPECT_EQ(same.faces[0].profile_times_ns[0], 1'000'000'000 - c.clock_offset_ns);
+    EXPECT_EQ(same.faces[0].accel_times_ns, f.accel_times_ns);
+    EXPECT_EQ(same.faces[0].travel_scale, 1.0);
+    EXPECT_EQ(same.faces[0].clock_offset_ns, 0);
 }

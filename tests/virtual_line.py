@@ -11,9 +11,18 @@ Table 2 and the simulated parts' truth, and checks the results files.
     /usr/bin/python3 virtual_line.py --bin-dir BUILD --parts 12 --out out/line     (make demo)
     /usr/bin/python3 virtual_line.py --bin-dir BUILD --parts 3 --check-mm 0.03     (ctest)
 
+With --commission SEED the virtual cell is commissioned like a real one first (docs/calibration.md
+"Commissioning"): its true geometry is moved off the nominal config by seeded amounts (`hotgauge
+calibrate virtual-truth`), the shipped artifact is scanned with the press stopped and again with
+it running, `hotgauge calibrate faces` and `calibrate clock` measure the geometry, and the line
+runs on that calibration; afterwards every part's archived recording is measured again with the
+nominal calibration, to show what commissioning changed.
+
 Everything runs on loopback. Exit status 0 when every part was measured (and, with
---check-mm, every feature within that distance of the truth and the results files complete).
+--check-mm, every feature within that distance of the truth and the results files complete;
+with --commission and --check-nominal-mm, the nominal geometry off by at least that much).
 """
+import glob
 import argparse
 import csv
 import json
@@ -233,7 +242,7 @@ class Line:
     """The virtual cell, hotgauged and the pieces between them, in one working folder."""
 
     def __init__(self, bin_dir, workdir, address, seed=1, temperature=1050.0, config_extra="",
-                 archive_every_nth_ok=0):
+                 archive_every_nth_ok=0, calibration=None, true_calibration=None):
         self.bin_dir, self.workdir, self.address = bin_dir, workdir, address
         self.seed, self.temperature = seed, temperature
         self.procs = []
@@ -246,6 +255,8 @@ class Line:
         self.axis_port = free_port()  # fixed: a restarted cell comes back on the same one
         self.config_extra = config_extra
         self.archive_every_nth_ok = archive_every_nth_ok
+        self.calibration = calibration or os.path.join(REPO, "config/calibration.yaml")
+        self.true_calibration = true_calibration  # None: the cell config's geometry
 
     def start(self):
         self.start_pty()
@@ -267,7 +278,8 @@ class Line:
                 "--address", self.address, "--mode", "peaks", "--seed", str(self.seed),
                 "--temperature", str(self.temperature), "--speed-mm-s", "200",
                 "--line-rate", "1000", "--accel-to", accel_to, "--axis-port", str(self.axis_port),
-                "--truth-dir", self.truth_dir, "--pyrometer-device", self.pyrometer_sim_dev]
+                "--truth-dir", self.truth_dir, "--pyrometer-device", self.pyrometer_sim_dev] + \
+               (["--true-calibration", self.true_calibration] if self.true_calibration else [])
 
     def start_cell(self, accel_to=None):
         self.accel_to = accel_to or getattr(self, "accel_to", f"127.0.0.1:{self.accel_port}")
@@ -277,7 +289,7 @@ class Line:
 
     def write_config(self, text=None):
         cfg = text or f"""# written by tests/virtual_line.py for the virtual cell
-calibration: {REPO}/config/calibration.yaml
+calibration: {self.calibration}
 faces: [top, bottom, side1, side2]
 recipes:
   1: {REPO}/config/parts/hub-a.yaml
@@ -454,6 +466,94 @@ def print_logs(workdir, lines=40):
             print(f"--- {name}.log (tail) ---\n" + "".join(open(path).readlines()[-lines:]))
 
 
+ARTIFACT = os.path.join(REPO, "config/artifacts/spheres-6.yaml")
+NOMINAL = os.path.join(REPO, "config/calibration.yaml")
+
+
+def hotgauge(bin_dir, *args):
+    """Runs the engineer's tool; returns its stdout, raises with its stderr on failure."""
+    r = subprocess.run([os.path.join(bin_dir, "src/app/hotgauge"), *args], capture_output=True,
+                       text=True, timeout=600)
+    if r.returncode != 0:
+        raise RuntimeError(f"hotgauge {' '.join(args)}: exit {r.returncode}\n{r.stderr[-3000:]}")
+    return r.stdout
+
+
+def rotation_deg(a, b):
+    """Angle of the rotation between two 3x3 rotations (lists of rows), degrees."""
+    import math
+    tr = sum(a[i][j] * b[i][j] for i in range(3) for j in range(3))  # trace(aᵀ·b)
+    return math.degrees(math.acos(max(-1.0, min(1.0, (tr - 1.0) / 2.0))))
+
+
+def compare_calibrations(measured, truth):
+    """Per face: translation, rotation and travel-scale error of `measured` against `truth`."""
+    m, t = yaml.safe_load(open(measured)), yaml.safe_load(open(truth))
+    tf = {f["name"]: f for f in t["faces"]}
+    rows = []
+    for f in m["faces"]:
+        g = tf[f["name"]]
+        A, B = f["camera_to_world"], g["camera_to_world"]
+        dt = sum((A[i][3] - B[i][3]) ** 2 for i in range(3)) ** 0.5
+        dr = rotation_deg([r[:3] for r in A[:3]], [r[:3] for r in B[:3]])
+        ds = abs(f["travel_scale"] / g["travel_scale"] - 1.0)
+        dm = rotation_deg(f["accel_to_camera"], g["accel_to_camera"])
+        rows.append((f["name"], dt, dr, ds, dm))
+    clock_us = (m["clock_offset_ns"] - t["clock_offset_ns"]) * 1e-3
+    return rows, clock_us
+
+
+def commission(bin_dir, workdir, seed):
+    """The virtual cell's true geometry, its artifact scans, and the calibration measured from
+    them; returns (calibration, true calibration)."""
+    d = os.path.join(workdir, "commissioning")
+    os.makedirs(d, exist_ok=True)
+    truth, faces, cal = (os.path.join(d, n) for n in ("true-calibration.yaml",
+                                                       "faces.yaml", "calibration.yaml"))
+    hotgauge(bin_dir, "calibrate", "virtual-truth", "--seed", str(seed), "--out", truth)
+    common = ["simulate", "--artifact", ARTIFACT, "--true-calibration", truth,
+              "--seed", str(seed)]
+    still, running = os.path.join(d, "artifact-still"), os.path.join(d, "artifact-running")
+    hotgauge(bin_dir, *common, "--in-force", NOMINAL, "--no-vibration", "--out", still)
+    print(hotgauge(bin_dir, "calibrate", "faces", "--artifact", ARTIFACT, still,
+                   "--calibration", NOMINAL, "--out", faces), end="")
+    hotgauge(bin_dir, *common, "--in-force", faces, "--out", running)
+    print(hotgauge(bin_dir, "calibrate", "clock", "--artifact", ARTIFACT, running,
+                   "--calibration", faces, "--out", cal), end="")
+    for label, path in (("nominal", NOMINAL), ("commissioned", cal)):
+        rows, clock_us = compare_calibrations(path, truth)
+        worst = max(rows, key=lambda r: r[1])
+        print(f"{label:>12} geometry vs the virtual cell's truth: faces off by up to "
+              f"{max(r[1] for r in rows):.4f} mm / {max(r[2] for r in rows):.5f}° "
+              f"(travel {max(r[3] for r in rows) * 100:.4f} %), accelerometer "
+              f"{max(r[4] for r in rows):.4f}°, clock {clock_us:+.1f} µs")
+    return cal, truth
+
+
+def measure_archived(line, parts, calibration):
+    """The parts' archived recordings measured again with `calibration`: in how many the part
+    was found, and, given each part's true pose, how many features were not measured and the
+    worst |feature − truth| of the others."""
+    found, not_measured, total, worst = 0, 0, 0, 0.0
+    for p in parts:
+        rec = glob.glob(os.path.join(line.archive_dir, "*", f"*_{p['part_id']}"))
+        assert rec, f"part {p['part_id']} is not in the archive"
+        out = json.loads(hotgauge(line.bin_dir, "measure", rec[0], "--calibration", calibration,
+                                  "--json"))
+        found += bool(out["match"] and out["match"]["found"])
+        pose = os.path.join(line.truth_dir, f"part-{p['part']:04d}", "part_pose.yaml")
+        out = json.loads(hotgauge(line.bin_dir, "measure", rec[0], "--calibration", calibration,
+                                  "--part-pose", pose, "--json"))
+        truth = line.truth(p["part"])
+        for f in out["features"]:
+            total += 1
+            if f["cold_mm"] is None:
+                not_measured += 1
+            else:
+                worst = max(worst, abs(f["cold_mm"] - truth[f["name"]]))
+    return found, not_measured, total, worst
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--bin-dir", default=os.path.join(REPO, "build"))
@@ -464,6 +564,11 @@ def main():
     ap.add_argument("--out", help="working folder (kept); default: a temporary one")
     ap.add_argument("--check-mm", type=float,
                     help="fail unless every feature of every part is within this of the truth")
+    ap.add_argument("--commission", type=int, metavar="SEED",
+                    help="perturb the virtual cell's true geometry with SEED and commission it")
+    ap.add_argument("--check-nominal-mm", type=float,
+                    help="with --commission: fail unless, with the nominal geometry, a part is not "
+                         "found, a feature not measured, or one off by at least this much")
     a = ap.parse_args()
     if a.out:
         shutil.rmtree(a.out, ignore_errors=True)
@@ -471,9 +576,13 @@ def main():
         workdir = os.path.abspath(a.out)
     else:
         workdir = tempfile.mkdtemp(prefix="hotgauge-line-")
-    line = Line(a.bin_dir, workdir, a.address, seed=a.seed)
     parts = []
     ok = False
+    cal = truth = None
+    if a.commission is not None:
+        cal, truth = commission(a.bin_dir, workdir, a.commission)
+    line = Line(a.bin_dir, workdir, a.address, seed=a.seed, calibration=cal,
+                true_calibration=truth, archive_every_nth_ok=1 if cal else 0)
     try:
         line.start()
         print(f"virtual line: camera {a.address}, PLC 127.0.0.1:{line.plc_port}, "
@@ -492,6 +601,15 @@ def main():
         print("\n" + text)
         csvs, jsonls, seqs = check_results_files(line.results_dir, parts)
         print(f"\nworst |measured - truth| over all features and parts: {worst:.4f} mm")
+        if cal:
+            found, missing, total, before = measure_archived(line, parts, NOMINAL)
+            print(f"commissioning: the archived recordings measured again with the nominal "
+                  f"geometry: part found in {found} of {len(parts)}; given the true part pose, "
+                  f"{missing} of {total} features not measured and the others off by up to "
+                  f"{before:.4f} mm; commissioned: every feature within {worst:.4f} mm")
+            if a.check_nominal_mm is not None:  # not found or not measured is worse than off
+                assert found < len(parts) or missing or before >= a.check_nominal_mm, \
+                    f"nominal geometry only {before:.4f} mm off: calibration did not matter"
         print(f"results: {', '.join(os.path.join(line.results_dir, f) for f in csvs + jsonls)} "
               f"(sequence {seqs[0]}..{seqs[-1]})")
         assert rcs.get("hotgauged") == 0, f"hotgauged exited with {rcs.get('hotgauged')}"

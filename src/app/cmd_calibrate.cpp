@@ -1,15 +1,24 @@
 // hotgauge calibrate: the cell's geometry into calibration.yaml (docs/calibration.md).
-//   nominal  the design values a cell config asserts, as method `nominal`: what a cell runs on
-//            before it is commissioned; the daemon says so at start.
+//   nominal        the design values a cell config asserts, as method `nominal`: what a cell
+//                  runs on before it is commissioned; the daemon says so at start.
+//   faces          every face's pose, scan direction and travel scale from a scan of an
+//                  artifact, and the accelerometer's mount and bias from gravity in it.
+//   clock          the camera → accelerometer clock offset from the artifact's plate scanned
+//                  with the press running, after `faces`.
+//   virtual-truth  a seeded true geometry for the virtual cell, off nominal as a real cell is.
 #include <spdlog/spdlog.h>
 
 #include <memory>
 
 #include "commands.hpp"
+#include "hotgauge/calib/align.hpp"
+#include "hotgauge/calib/artifact.hpp"
 #include "hotgauge/calib/calibration.hpp"
+#include "hotgauge/calib/clock.hpp"
 #include "hotgauge/core/clock.hpp"
+#include "hotgauge/io/recording_io.hpp"
+#include "hotgauge/sim/geometry.hpp"
 #include "hotgauge/sim/simulator.hpp"
-#include "hotgauge/vcell/render.hpp"
 
 namespace hotgauge::app {
 namespace {
@@ -17,7 +26,81 @@ namespace {
 struct CalibrateArgs {
     std::string cell = HOTGAUGE_CONFIG_DIR "/cell.yaml";
     std::string out;
+    std::string artifact, recording;
+    std::string calibration = HOTGAUGE_CONFIG_DIR "/calibration.yaml";  // in force
+    std::uint64_t seed = 1;
 };
+
+int fail(const core::Error& e) {
+    spdlog::error("{}", e.message);
+    return 1;
+}
+
+int run_faces(const CalibrateArgs& a) {
+    auto artifact = calib::read_artifact(a.artifact);
+    if (!artifact) return fail(artifact.error());
+    auto base = calib::read_calibration(a.calibration);
+    if (!base) return fail(base.error());
+    auto rec = io::read_recording(a.recording);
+    if (!rec) return fail(rec.error());
+    auto c = calib::calibrate_faces(*artifact, *rec, *base);
+    if (!c) {
+        spdlog::error("calibration refused, {} stays in force: {}", a.calibration,
+                      c.error().message);
+        return 1;
+    }
+    c->source = a.artifact + " scanned in " + a.recording;
+    if (auto w = calib::write_calibration(*c, a.out); !w) return fail(w.error());
+    for (const auto& f : c->faces)
+        std::printf("%-8s rms %.4f mm, %g spheres, travel scale %.6f\n", f.name.c_str(),
+                    c->residuals.at(f.name + ".rms_mm"), c->residuals.at(f.name + ".spheres"),
+                    f.travel_scale);
+    std::printf("accelerometer: gravity residual %.5f m/s², bias [%.4f, %.4f, %.4f] m/s²\n",
+                c->residuals.at("accel.gravity_rms_mps2"), c->accel_bias_mps2.x(),
+                c->accel_bias_mps2.y(), c->accel_bias_mps2.z());
+    std::printf("calibration %s\n", a.out.c_str());
+    return 0;
+}
+
+int run_clock(const CalibrateArgs& a) {
+    auto artifact = calib::read_artifact(a.artifact);
+    if (!artifact) return fail(artifact.error());
+    auto c = calib::read_calibration(a.calibration);
+    if (!c) return fail(c.error());
+    auto rec = io::read_recording(a.recording);
+    if (!rec) return fail(rec.error());
+    if (auto g = calib::apply_geometry(*c, a.calibration, *rec); !g) return fail(g.error());
+    auto clock = calib::estimate_clock_offset(*rec, *artifact);
+    if (!clock) {
+        spdlog::error("clock offset not measured, {} unchanged: {}", a.calibration,
+                      clock.error().message);
+        return 1;
+    }
+    c->clock_offset_ns = clock->offset_ns;
+    c->calibrated_at = core::iso8601_utc(core::realtime_ns());
+    c->residuals["clock.u_us"] = clock->u_ns * 1e-3;
+    c->residuals["clock.fit_rms_mm"] = clock->residual_mm;
+    c->residuals["clock.motion_rms_mm"] = clock->motion_mm;
+    c->source += "; clock from " + a.recording;
+    if (auto w = calib::write_calibration(*c, a.out); !w) return fail(w.error());
+    std::printf(
+        "clock offset %.1f µs (u %.1f µs): fit %.4f mm RMS, head moved %.4f mm RMS, "
+        "%d profiles\ncalibration %s\n",
+        clock->offset_ns * 1e-3, clock->u_ns * 1e-3, clock->residual_mm, clock->motion_mm,
+        clock->profiles, a.out.c_str());
+    return 0;
+}
+
+int run_virtual_truth(const CalibrateArgs& a) {
+    auto cell = sim::read_cell_config(a.cell);
+    if (!cell) return fail(cell.error());
+    const auto nominal =
+        sim::nominal_calibration(*cell, a.cell, core::iso8601_utc(core::realtime_ns()));
+    const auto truth = sim::perturbed_calibration(nominal, a.seed);
+    if (auto w = calib::write_calibration(truth, a.out); !w) return fail(w.error());
+    std::printf("virtual cell's true geometry %s (%s)\n", a.out.c_str(), truth.source.c_str());
+    return 0;
+}
 
 int run_nominal(const CalibrateArgs& a) {
     auto cell = sim::read_cell_config(a.cell);
@@ -25,8 +108,7 @@ int run_nominal(const CalibrateArgs& a) {
         spdlog::error("{}", cell.error().message);
         return 1;
     }
-    const auto c =
-        vcell::nominal_calibration(*cell, a.cell, core::iso8601_utc(core::realtime_ns()));
+    const auto c = sim::nominal_calibration(*cell, a.cell, core::iso8601_utc(core::realtime_ns()));
     if (auto w = calib::write_calibration(c, a.out); !w) {
         spdlog::error("{}", w.error().message);
         return 1;
@@ -46,7 +128,35 @@ Command add_calibrate(CLI::App& app) {
         s->add_subcommand("nominal", "a cell config's design geometry as calibration.yaml");
     nominal->add_option("--cell", a->cell, "cell config")->capture_default_str();
     nominal->add_option("--out,-o", a->out, "calibration file to write")->required();
-    return [a] { return run_nominal(*a); };
+    auto* faces = s->add_subcommand(
+        "faces", "face poses, travel and accelerometer from a scan of an artifact");
+    faces->add_option("--artifact", a->artifact, "artifact file (spheres, planes)")->required();
+    faces->add_option("recording", a->recording, "the artifact's recording")->required();
+    faces
+        ->add_option("--calibration", a->calibration,
+                     "the calibration in force (sensor model, clock offset)")
+        ->capture_default_str();
+    faces->add_option("--out,-o", a->out, "calibration file to write")->required();
+    auto* clock = s->add_subcommand(
+        "clock", "the camera → accelerometer clock offset from the plate under press vibration");
+    clock->add_option("--artifact", a->artifact, "artifact file (its first plane: the plate)")
+        ->required();
+    clock->add_option("recording", a->recording, "the artifact scanned with the press running")
+        ->required();
+    clock->add_option("--calibration", a->calibration, "the calibration from `calibrate faces`")
+        ->required();
+    clock->add_option("--out,-o", a->out, "calibration file to write")->required();
+    auto* truth = s->add_subcommand(
+        "virtual-truth", "a seeded true geometry for the virtual cell (issue 16 perturbations)");
+    truth->add_option("--cell", a->cell, "cell config")->capture_default_str();
+    truth->add_option("--seed", a->seed, "random seed")->capture_default_str();
+    truth->add_option("--out,-o", a->out, "calibration file to write")->required();
+    return [a, nominal, faces, clock] {
+        if (nominal->parsed()) return run_nominal(*a);
+        if (faces->parsed()) return run_faces(*a);
+        if (clock->parsed()) return run_clock(*a);
+        return run_virtual_truth(*a);
+    };
 }
 
 }  // namespace hotgauge::app

@@ -6,9 +6,12 @@
 #include <ctime>
 
 #include "commands.hpp"
+#include "hotgauge/calib/artifact.hpp"
+#include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/io/recording_io.hpp"
 #include "hotgauge/plc/pyrometer.hpp"
+#include "hotgauge/sim/geometry.hpp"
 #include "hotgauge/sim/simulator.hpp"
 #include "hotgauge/vcell/virtual_cell.hpp"
 
@@ -20,6 +23,9 @@ struct SimulateArgs {
     std::string cell = HOTGAUGE_CONFIG_DIR "/cell.yaml";
     std::string out;
     std::string truth;
+    std::string artifact;          // scan this artifact instead of a part
+    std::string true_calibration;  // the cell's true geometry (default: the cell config's)
+    std::string in_force;          // the calibration the recording is written with
     sim::SimOptions opt;
     bool quick = false;
     bool no_vibration = false;
@@ -114,6 +120,16 @@ int run(const SimulateArgs& a) {
         spdlog::error("{}", cell.error().message);
         return 1;
     }
+    if (!a.true_calibration.empty()) {
+        auto truth = calib::read_calibration(a.true_calibration);
+        auto moved = truth ? sim::with_geometry(*cell, *truth, a.true_calibration)
+                           : core::Result<sim::CellConfig>(truth.error());
+        if (!moved) {
+            spdlog::error("{}", moved.error().message);
+            return 1;
+        }
+        *cell = std::move(*moved);
+    }
     sim::CellConfig c = a.quick ? sim::quick(*cell) : *cell;
     if (a.no_vibration) c.vibration.enabled = false;
     for (auto& m : c.vibration.modes) m.amplitude_mm *= a.vibration_scale;
@@ -122,6 +138,14 @@ int run(const SimulateArgs& a) {
     if (a.dropout_fraction) c.sensor.dropout_fraction = *a.dropout_fraction;
     if (a.max_tilt_deg) c.placement.max_tilt_deg = *a.max_tilt_deg;
     sim::SimOptions opt = a.opt;
+    if (!a.in_force.empty()) {
+        auto in_force = calib::read_calibration(a.in_force);
+        if (!in_force) {
+            spdlog::error("{}", in_force.error().message);
+            return 1;
+        }
+        opt.in_force = std::move(*in_force);
+    }
     if (a.yaw_deg || !a.offset_mm.empty()) {
         Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
         T.rotate(
@@ -137,7 +161,17 @@ int run(const SimulateArgs& a) {
         return 2;
     }
     const auto t0 = std::chrono::steady_clock::now();
-    auto sim = sim::simulate(*recipe, c, opt);
+    core::Result<sim::SimResult> sim = core::make_error("");
+    if (!a.artifact.empty()) {
+        auto artifact = calib::read_artifact(a.artifact);
+        if (!artifact) {
+            spdlog::error("{}", artifact.error().message);
+            return 1;
+        }
+        sim = sim::simulate_artifact(*artifact, c, opt);
+    } else {
+        sim = sim::simulate(*recipe, c, opt);
+    }
     if (!sim) {
         spdlog::error("{}", sim.error().message);
         return 1;
@@ -172,6 +206,12 @@ Command add_simulate(CLI::App& app) {
     s->add_option("--out,-o", a->out, "recording folder to write");
     s->add_option("--truth", a->truth, "ground-truth folder (default: OUT.truth)");
     s->add_option("--recipe", a->recipe, "part recipe")->capture_default_str();
+    s->add_option("--artifact", a->artifact,
+                  "scan this calibration artifact (docs/calibration.md) instead of a part");
+    s->add_option("--true-calibration", a->true_calibration,
+                  "the cell's true geometry, a calibration.yaml (default: the cell config's)");
+    s->add_option("--in-force", a->in_force,
+                  "the calibration the cell's software records with (default: the truth)");
     s->add_option("--cell", a->cell, "cell configuration")->capture_default_str();
     s->add_option("--seed", a->opt.seed, "random seed")->capture_default_str();
     s->add_option("--temperature", a->opt.temperature_c, "part temperature, °C")

@@ -150,7 +150,12 @@ core::Result<void> apply_geometry(const Calibration& c, const std::string& calib
         f.T_world_camera = g.T_world_camera;
         f.scan_direction = g.scan_direction;
         f.R_camera_accel = g.R_camera_accel;
-        for (double& p : f.profile_positions_mm) p *= g.travel_scale;
+        const double rescale = g.travel_scale / f.travel_scale;
+        for (double& p : f.profile_positions_mm) p *= rescale;
+        const std::int64_t shift = c.clock_offset_ns - f.clock_offset_ns;
+        for (std::int64_t& t : f.profile_times_ns) t += shift;
+        f.travel_scale = g.travel_scale;
+        f.clock_offset_ns = c.clock_offset_ns;
     }
     return {};
 }

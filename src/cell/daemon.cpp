@@ -524,6 +524,8 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
     acq_beat = steady_ns();
     if (!out)
         return Failure{plc::ErrorCode::kDeviceLost, "face " + name + ": " + out.error().message};
+    out->face.travel_scale = face->travel_scale;  // applied above: a recalibration replaces it
+    out->face.clock_offset_ns = sc.clock_offset_ns;
     rec.faces.push_back(std::move(out->face));
     return std::nullopt;
 }

@@ -293,6 +293,18 @@ Result<FaceScan> read_face(const fs::path& root, const std::string& name) {
     f.T_world_camera.makeAffine();
     f.scan_direction = s.col(0);
     f.R_camera_accel = R;
+    if (const YAML::Node n = (*doc)["travel_scale"]) {
+        const auto v = as_number(n);
+        if (!v || !(*v > 0.0) || !std::isfinite(*v))
+            return make_error(where(fy) + "'travel_scale' must be a positive number" + line_of(n));
+        f.travel_scale = *v;
+    }
+    if (const YAML::Node n = (*doc)["clock_offset_ns"]) {
+        const auto v = as_number(n);
+        if (!v || !std::isfinite(*v) || *v != std::round(*v) || std::abs(*v) > 1e15)
+            return make_error(where(fy) + "'clock_offset_ns' must be an integer" + line_of(n));
+        f.clock_offset_ns = static_cast<std::int64_t>(*v);
+    }
 
     auto prof = read_array(dir, "profiles.npy", "<f4", 3, {-1, 2}, "(N, W, 2)");
     if (!prof) return prof.error();
@@ -411,6 +423,9 @@ Result<void> write_face(const FaceScan& f, const fs::path& dir) {
         y += (r ? ", " : "") + fmt_row(row.data(), 3);
     }
     y += "]\n";
+    // Our own keys (readers of the contract ignore them): what the capture already applied.
+    if (f.travel_scale != 1.0) y += "travel_scale: " + fmt_double(f.travel_scale) + "\n";
+    if (f.clock_offset_ns != 0) y += "clock_offset_ns: " + std::to_string(f.clock_offset_ns) + "\n";
     if (auto ok = write_text(dir / "face.yaml", y); !ok) return ok;
 
     const std::int64_t N = f.n_profiles(), K = f.n_accel();

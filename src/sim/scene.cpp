@@ -52,14 +52,30 @@ struct RayHit {
     Eigen::Vector3d normal;
 };
 
-// First hit of a world ray on the part or (when visible) the support plate.
+// First hit of the ray o + t·d (d unit, t in (0, t_max)) on the outside of a sphere.
+std::optional<RayHit> cast_sphere(const calib::ArtifactSphere& s, const Eigen::Vector3d& o,
+                                  const Eigen::Vector3d& d, double t_max) {
+    const double r = 0.5 * s.diameter_mm;
+    const Eigen::Vector3d oc = o - s.center_mm;
+    const double b = d.dot(oc), disc = b * b - (oc.squaredNorm() - r * r);
+    if (disc <= 0.0) return std::nullopt;
+    const double t = -b - std::sqrt(disc);
+    if (t <= 0.0 || t >= t_max) return std::nullopt;
+    return RayHit{t, (oc + t * d) / r};
+}
+
+// First hit of a world ray on the part, the artifact's spheres or (when visible) the support.
 std::optional<RayHit> cast(const core::AxisymmetricSolid& solid,
-                           const Eigen::Isometry3d& T_part_world, bool support, double support_half,
-                           const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_max) {
+                           const Eigen::Isometry3d& T_part_world,
+                           const std::vector<calib::ArtifactSphere>& spheres, bool support,
+                           double support_half, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+                           double t_max) {
     std::optional<RayHit> best;
     const Eigen::Vector3d op = T_part_world * o, dp = T_part_world.linear() * d;
     if (auto h = solid.intersect(op, dp, t_max))
         best = RayHit{h->t, T_part_world.linear().transpose() * h->normal};
+    for (const auto& s : spheres)
+        if (auto h = cast_sphere(s, o, d, best ? best->t : t_max)) best = h;
     if (support && d.z() < 0.0 && o.z() > 0.0) {
         const double t = -o.z() / d.z();
         const Eigen::Vector3d p = o + t * d;
@@ -95,6 +111,15 @@ core::Result<Scene> Scene::create(const core::Recipe& recipe, const CellConfig& 
     return Scene(cell, std::move(truth), std::move(solid));
 }
 
+Scene Scene::create_artifact(const calib::Artifact& artifact, const CellConfig& cell) {
+    SimTruth truth;
+    truth.range_noise_mm = cell.sensor.range_noise_mm;
+    truth.support_half_size_mm = cell.support_half_size_mm;
+    Scene scene(cell, std::move(truth), core::AxisymmetricSolid({}, {}));
+    scene.spheres_ = artifact.spheres;
+    return scene;
+}
+
 Scene::Scene(const CellConfig& cell, SimTruth truth, core::AxisymmetricSolid solid)
     : cell_(cell),
       truth_(std::move(truth)),
@@ -127,8 +152,8 @@ void Scene::cast_profile(const FaceConfig& fc, const Eigen::Vector3d& origin, Ra
     const Eigen::Vector3d imager = origin + R * s.camera_center_mm;
     for (int i = 0; i < s.width; ++i) {
         const Eigen::Vector3d d = R * dir_cam_[i];
-        const auto hit = cast(solid_, T_part_world_, fc.support_visible, cell_.support_half_size_mm,
-                              origin, d, 1e4);
+        const auto hit = cast(solid_, T_part_world_, spheres_, fc.support_visible,
+                              cell_.support_half_size_mm, origin, d, 1e4);
         if (!hit) continue;
         const Eigen::Vector3d p = origin + hit->t * d;
         if (occluded(p)) continue;
@@ -141,7 +166,7 @@ void Scene::cast_profile(const FaceConfig& fc, const Eigen::Vector3d& origin, Ra
             const Eigen::Vector3d to_imager = imager - p;
             const double dist = to_imager.norm();
             if (hit->normal.dot(to_imager) * hit->normal.dot(-d) <= 0.0) continue;
-            if (cast(solid_, T_part_world_, false, 0.0, p + 1e-6 * to_imager / dist,
+            if (cast(solid_, T_part_world_, spheres_, false, 0.0, p + 1e-6 * to_imager / dist,
                      to_imager / dist, dist))
                 continue;
         }
@@ -167,7 +192,7 @@ AccelHead::AccelHead(const AccelConfig& a, const Eigen::Matrix3d& R_world_accel,
     const double bz = a.bias_mps2 * (2 * rng.uniform() - 1);
     const double by = a.bias_mps2 * (2 * rng.uniform() - 1);
     const double bx = a.bias_mps2 * (2 * rng.uniform() - 1);
-    bias_mps2_ = Eigen::Vector3d(bx, by, bz);
+    bias_mps2_ = a.fixed_bias_mps2 ? *a.fixed_bias_mps2 : Eigen::Vector3d(bx, by, bz);
 }
 
 Eigen::Vector3f AccelHead::sample(const Vibration& vibration, double t_s, RandomStream& rng) const {

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstring>
 
+#include "hotgauge/sim/geometry.hpp"
+
 namespace hotgauge::vcell {
 namespace {
 
@@ -23,42 +25,9 @@ const std::vector<float>& normal_table() {
 
 }  // namespace
 
-namespace {
-
-calib::SensorModel sensor_model(const sim::SensorConfig& s) {
-    calib::SensorModel m;
-    m.width = s.width;
-    m.pitch_mm = s.pitch_mm;
-    m.standoff_mm = s.standoff_mm;
-    m.min_range_mm = s.min_range_mm;
-    m.max_range_mm = s.max_range_mm;
-    m.baseline_mm = s.camera_center_mm.y();
-    return m;
-}
-
-}  // namespace
-
 core::Result<acquire::Triangulation> sensor_triangulation(const sim::SensorConfig& s,
                                                           int height_px) {
-    return calib::triangulation(sensor_model(s), height_px);
-}
-
-calib::Calibration nominal_calibration(const sim::CellConfig& cell, const std::string& source,
-                                       const std::string& calibrated_at) {
-    calib::Calibration c;
-    c.calibrated_at = calibrated_at;
-    c.method = "nominal";
-    c.source = source;
-    c.sensor = sensor_model(cell.sensor);
-    for (const auto& f : cell.faces) {
-        calib::FaceGeometry g;
-        g.name = f.name;
-        g.T_world_camera = f.T_world_camera;
-        g.scan_direction = f.scan_direction;
-        g.R_camera_accel = f.R_camera_accel;
-        c.faces.push_back(g);
-    }
-    return c;
+    return calib::triangulation(sim::sensor_model(s), height_px);
 }
 
 double glow_scale(double temperature_c) {

@@ -107,12 +107,16 @@ struct VirtualCell::Impl {
         device.reset();  // stops the renderer's thread before what it renders from goes
     }
 
-    Eigen::Vector3d sensor_origin(std::int64_t t_ns) const {
-        const double travel_mm =
-            config.speed_mm_s * static_cast<double>(t_ns - t_scan_start_ns) * 1e-9;
+    // Where the sensor is when the camera stamps `camera_ns`: the camera's clock runs
+    // cell.clock_offset_ns behind the accelerometer's (the true time), the axis travels
+    // travel_scale × the commanded speed (sim::with_geometry).
+    Eigen::Vector3d sensor_origin(std::int64_t camera_ns) const {
+        const sim::FaceConfig* f = face.load();
+        const double travel_mm = config.speed_mm_s * f->travel_scale *
+                                 static_cast<double>(camera_ns - t_scan_start_ns) * 1e-9;
+        const std::int64_t t_ns = camera_ns + config.cell.clock_offset_ns;
         const Eigen::Vector3d u =
             vibration->displacement_mm(static_cast<double>(t_ns - t0_ns) * 1e-9);
-        const sim::FaceConfig* f = face.load();
         return f->T_world_camera.translation() + travel_mm * f->scan_direction.normalized() + u;
     }
 

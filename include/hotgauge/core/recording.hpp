@@ -17,6 +17,12 @@ struct FaceScan {
     Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();  // face.yaml camera_to_world
     Eigen::Vector3d scan_direction = Eigen::Vector3d::UnitY();         // unit, world frame
     Eigen::Matrix3d R_camera_accel = Eigen::Matrix3d::Identity();      // face.yaml accel_to_camera
+    // What the capturing software already applied from its calibration (face.yaml's optional
+    // travel_scale and clock_offset_ns, docs/calibration.md): the positions are commanded travel
+    // times travel_scale, the times camera clock + clock_offset_ns. A later calibration replaces
+    // them (calib::apply_geometry). Other writers leave them out: 1 and 0.
+    double travel_scale = 1.0;
+    std::int64_t clock_offset_ns = 0;
 
     std::int64_t width = 0;                      // W points per profile
     std::vector<float> profiles_mm;              // N*W*2: (x, z) camera frame, NaN = no return

@@ -48,6 +48,8 @@ class Scene {
     // pose, σ, occlusion) and fills the truth's part fields.
     static core::Result<Scene> create(const core::Recipe& recipe, const CellConfig& cell,
                                       const SimOptions& options, std::mt19937_64& rng);
+    // The artifact's spheres (world frame) in place of a part.
+    static Scene create_artifact(const calib::Artifact& artifact, const CellConfig& cell);
 
     const SimTruth& truth() const { return truth_; }
     SimTruth& truth() { return truth_; }
@@ -65,6 +67,7 @@ class Scene {
     CellConfig cell_;
     SimTruth truth_;
     core::AxisymmetricSolid solid_;
+    std::vector<calib::ArtifactSphere> spheres_;  // world frame
     Eigen::Isometry3d T_part_world_;
     std::vector<Eigen::Vector3d> dir_cam_;  // ray directions, camera frame
 };

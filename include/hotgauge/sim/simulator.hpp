@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "hotgauge/calib/artifact.hpp"
+#include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/recording.hpp"
 #include "hotgauge/core/result.hpp"
@@ -42,6 +44,7 @@ struct FaceConfig {
     Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();  // at profile position 0
     Eigen::Vector3d scan_direction = Eigen::Vector3d::UnitY();
     Eigen::Matrix3d R_camera_accel = Eigen::Matrix3d::Identity();
+    double travel_scale = 1.0;  // true travel / commanded travel (sim::with_geometry)
     double scan_length_mm = 240.0;
     double profile_spacing_mm = 0.2;
     bool support_visible = true;  // the flat support plate (world z = 0) is in this scan
@@ -54,6 +57,8 @@ struct AccelConfig {
     double range_g = 8.0;            // output clips at ±range
     double margin_s = 1.0;           // record before the first and after the last profile
     double jitter_ns = 0.0;          // uniform timestamp jitter ±this (0: uniform grid)
+    // Set: the sensor's bias (sim::with_geometry); unset: drawn per face in ±bias_mps2.
+    std::optional<Eigen::Vector3d> fixed_bias_mps2;
 };
 
 struct PlacementConfig {
@@ -69,6 +74,9 @@ struct CellConfig {
     PlacementConfig placement;
     double support_half_size_mm = 200.0;
     double face_gap_s = 2.0;  // robot moves between face scans
+    // The camera's clock runs this far behind the accelerometer's (the sim's time axis): a
+    // profile taken at t carries the camera timestamp t − clock_offset_ns.
+    std::int64_t clock_offset_ns = 0;
 };
 
 // Reads config/cell.yaml (docs/simulator.md); errors name file:line:key.
@@ -90,6 +98,10 @@ struct SimOptions {
     // Occlusion: a contiguous sector of the part, this fraction of the full turn at a random
     // azimuth, returns nothing in every face (a gripper finger, loose scale, steam).
     double occluded_fraction = 0.0;
+    // The calibration in force: the recording's face.yaml geometry, positions (commanded travel ×
+    // its travel_scale) and times (camera clock + its clock offset) as the cell's software writes
+    // them with it. Unset: the cell's true geometry (a perfectly commissioned cell).
+    std::optional<calib::Calibration> in_force;
 };
 
 struct FeatureTruth {
@@ -128,6 +140,12 @@ struct SimResult {
 
 core::Result<SimResult> simulate(const core::Recipe& recipe, const CellConfig& cell,
                                  const SimOptions& options);
+
+// The artifact scanned instead of a part (cold; part.yaml recipe = the artifact's name): its
+// spheres on invisible posts, the support plate where the face sees it. options.seed, the
+// temperature, pose and occlusion are not used; the truth holds the per-face displacement only.
+core::Result<SimResult> simulate_artifact(const calib::Artifact& artifact, const CellConfig& cell,
+                                          const SimOptions& options);
 
 // Ground truth beside a recording: DIR/truth.yaml (pose, features, per-face figures),
 // DIR/part_pose.yaml (world_from_part, for `hotgauge measure --part-pose`), DIR/<face>/u_true.npy

@@ -35,11 +35,6 @@ struct StripeLook {
 core::Result<acquire::Triangulation> sensor_triangulation(const sim::SensorConfig& sensor,
                                                           int height_px = 1088);
 
-// The geometry a cell config asserts, as a calibration of method `nominal` (design values, not
-// measured): what a cell runs on before it is commissioned. `source` names the config file.
-calib::Calibration nominal_calibration(const sim::CellConfig& cell, const std::string& source,
-                                       const std::string& calibrated_at);
-
 // Glow of a part at `temperature_c` relative to StripeLook::glow at 1 000 °C (Planck's law at
 // 405 nm through the sensor's filter, normalised); 0 below 500 °C.
 double glow_scale(double temperature_c);
