@@ -86,8 +86,8 @@ int run_clock(const CalibrateArgs& a) {
     std::printf(
         "clock offset %.1f µs (u %.1f µs): fit %.4f mm RMS, head moved %.4f mm RMS, "
         "%d profiles\ncalibration %s\n",
-        clock->offset_ns * 1e-3, clock->u_ns * 1e-3, clock->residual_mm, clock->motion_mm,
-        clock->profiles, a.out.c_str());
+        static_cast<double>(clock->offset_ns) * 1e-3, clock->u_ns * 1e-3, clock->residual_mm,
+        clock->motion_mm, clock->profiles, a.out.c_str());
     return 0;
 }
 

@@ -20,31 +20,30 @@ namespace {
 namespace fs = std::filesystem;
 
 struct MeasureArgs {
-    std::string recording;
-    std::string recipe;          // default: config/parts/<recording's recipe>.yaml
-    std::string pose = "match";  // match | truth
-    std::string part_pose;       // a pose file: no matching
-    std::string model;           // a saved model (hotgauge model build); default: from the recipe
+    MeasureJob job;
     std::string ply;
-    std::string calibration;  // the cell's geometry in place of the recording's face.yaml
     bool json = false;
-    bool no_compensation = false;
-    double clock_offset_ms = 0.0;
-    double highpass_hz = 0.0;
 };
 
-int run(const MeasureArgs& a) {
+}  // namespace
+
+std::optional<pipeline::PartResult> measure_job(const MeasureJob& a, core::Recording* rec_out) {
     auto rec = io::read_recording(a.recording);
     if (!rec) {
         spdlog::error("{}", rec.error().message);
-        return 1;
+        return std::nullopt;
+    }
+    if (!rec->temperature_c && a.default_temperature_c) {
+        spdlog::info("{}: no temperature recorded, taken as {} °C", a.recording,
+                     *a.default_temperature_c);
+        rec->temperature_c = a.default_temperature_c;
     }
     if (!a.calibration.empty()) {
         auto cal = calib::read_calibration(a.calibration);
         auto applied = cal ? calib::apply_geometry(*cal, a.calibration, *rec) : cal.error();
         if (!applied) {
             spdlog::error("{}", applied.error().message);
-            return 1;
+            return std::nullopt;
         }
         if (!cal->measured())
             spdlog::warn("{}: method nominal: design geometry, not measured", a.calibration);
@@ -55,7 +54,7 @@ int run(const MeasureArgs& a) {
     auto recipe = io::read_recipe(recipe_path);
     if (!recipe) {
         spdlog::error("{}", recipe.error().message);
-        return 1;
+        return std::nullopt;
     }
     pipeline::PipelineOptions opt;
     opt.compensate = !a.no_compensation;
@@ -65,20 +64,20 @@ int run(const MeasureArgs& a) {
     if (a.pose == "truth") {
         if (!pose_file.empty()) {
             spdlog::error("give either --pose truth or --part-pose, not both");
-            return 1;
+            return std::nullopt;
         }
         pose_file = fs::path(a.recording).lexically_normal().string() + ".truth/part_pose.yaml";
         if (!fs::exists(pose_file)) {
             spdlog::error("--pose truth: {} not found (only simulated recordings have a truth)",
                           pose_file);
-            return 1;
+            return std::nullopt;
         }
     }
     if (!pose_file.empty()) {
         auto pose = io::read_part_pose(pose_file);
         if (!pose) {
             spdlog::error("{}", pose.error().message);
-            return 1;
+            return std::nullopt;
         }
         opt.T_world_part = *pose;
         opt.pose_source = (a.pose == "truth" ? "truth " : "file ") + pose_file;
@@ -88,25 +87,35 @@ int run(const MeasureArgs& a) {
         auto m = io::read_model(a.model);
         if (!m) {
             spdlog::error("{}", m.error().message);
-            return 1;
+            return std::nullopt;
         }
         if (m->name != recipe->name) {
             spdlog::error("{}: model of part '{}', recipe is '{}'", a.model, m->name, recipe->name);
-            return 1;
+            return std::nullopt;
         }
         model = std::move(*m);
         opt.model = &*model;
     }
-    const pipeline::PartResult result = pipeline::run(*rec, *recipe, opt);
+    pipeline::PartResult result = pipeline::run(*rec, *recipe, opt);
     for (const auto& w : result.warnings) spdlog::warn("{}", w);
+    if (rec_out) *rec_out = std::move(*rec);
+    return result;
+}
+
+namespace {
+
+int run(const MeasureArgs& a) {
+    core::Recording rec;
+    const auto result = measure_job(a.job, &rec);
+    if (!result) return 1;
     if (a.json)
-        std::printf("%s\n", pipeline::to_json(result).c_str());
+        std::printf("%s\n", pipeline::to_json(*result).c_str());
     else
-        std::fputs(pipeline::to_table(result).c_str(), stdout);
+        std::fputs(pipeline::to_table(*result).c_str(), stdout);
 
     if (!a.ply.empty()) {
         std::vector<Eigen::Vector3d> all;
-        for (const auto& f : rec->faces) {
+        for (const auto& f : rec.faces) {
             auto cloud = core::world_cloud(f);
             all.insert(all.end(), cloud.points_mm.begin(), cloud.points_mm.end());
         }
@@ -121,30 +130,34 @@ int run(const MeasureArgs& a) {
 
 }  // namespace
 
-Command add_measure(CLI::App& app) {
-    auto a = std::make_shared<MeasureArgs>();
-    auto* s = app.add_subcommand("measure", "measure a recording (offline pipeline)");
-    s->add_option("recording", a->recording, "recording folder (hotgauge-recording/1)")->required();
-    s->add_option("--recipe", a->recipe, "part recipe (default: config/parts/<recipe>.yaml)");
-    s->add_option("--pose", a->pose,
+void add_measure_job_options(CLI::App* s, MeasureJob& j) {
+    s->add_option("recording", j.recording, "recording folder (hotgauge-recording/1)")->required();
+    s->add_option("--recipe", j.recipe, "part recipe (default: config/parts/<recipe>.yaml)");
+    s->add_option("--pose", j.pose,
                   "where the part pose comes from: match (find it in the scans) or truth "
                   "(REC.truth/part_pose.yaml, simulated recordings)")
         ->check(CLI::IsMember({"match", "truth"}))
         ->capture_default_str();
-    s->add_option("--part-pose", a->part_pose, "part pose file (world_from_part): no matching");
-    s->add_option("--model", a->model,
+    s->add_option("--part-pose", j.part_pose, "part pose file (world_from_part): no matching");
+    s->add_option("--model", j.model,
                   "PPF model file (hotgauge model build); default: built "
                   "from the recipe");
-    s->add_flag("--json", a->json, "print one JSON object (docs/measure-output.md)");
-    s->add_flag("--no-compensation", a->no_compensation, "measure without vibration compensation");
-    s->add_option("--clock-offset-ms", a->clock_offset_ms,
+    s->add_flag("--no-compensation", j.no_compensation, "measure without vibration compensation");
+    s->add_option("--clock-offset-ms", j.clock_offset_ms,
                   "accelerometer clock minus camera clock, ms")
         ->capture_default_str();
-    s->add_option("--highpass-hz", a->highpass_hz,
+    s->add_option("--highpass-hz", j.highpass_hz,
                   "compensation high-pass corner, Hz (default 1.5)");
-    s->add_option("--calibration", a->calibration,
+    s->add_option("--calibration", j.calibration,
                   "calibration.yaml: the cell's geometry replaces the recording's face.yaml "
                   "(docs/calibration.md)");
+}
+
+Command add_measure(CLI::App& app) {
+    auto a = std::make_shared<MeasureArgs>();
+    auto* s = app.add_subcommand("measure", "measure a recording (offline pipeline)");
+    add_measure_job_options(s, a->job);
+    s->add_flag("--json", a->json, "print one JSON object (docs/measure-output.md)");
     s->add_option("--ply", a->ply, "write the world cloud of all faces as binary PLY");
     return [a] { return run(*a); };
 }

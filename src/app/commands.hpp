@@ -3,6 +3,11 @@
 // returns the process exit code when run.
 #include <CLI/CLI.hpp>
 #include <functional>
+#include <optional>
+#include <string>
+
+#include "hotgauge/core/recording.hpp"
+#include "hotgauge/pipeline/pipeline.hpp"
 
 namespace hotgauge::app {
 
@@ -16,5 +21,25 @@ Command add_model(CLI::App& app);
 Command add_grab(CLI::App& app);
 Command add_plc(CLI::App& app);
 Command add_calibrate(CLI::App& app);
+Command add_verify(CLI::App& app);
+
+// The measure job, shared by `measure` and `verify`: read the recording, take the calibration's
+// geometry, read the recipe, the pose or model, run the pipeline.
+struct MeasureJob {
+    std::string recording;
+    std::string recipe;          // default: config/parts/<recording's recipe>.yaml
+    std::string pose = "match";  // match | truth
+    std::string part_pose;       // a pose file: no matching
+    std::string model;           // a saved model (hotgauge model build); default: from the recipe
+    std::string calibration;     // the cell's geometry in place of the recording's face.yaml
+    bool no_compensation = false;
+    double clock_offset_ms = 0.0;
+    double highpass_hz = 0.0;
+    std::optional<double> default_temperature_c;  // when the recording has none (a cold master)
+};
+void add_measure_job_options(CLI::App* command, MeasureJob& job);
+// Logs what went wrong and returns nullopt; `recording` (optional) gets the recording measured.
+std::optional<pipeline::PartResult> measure_job(const MeasureJob& job,
+                                                core::Recording* recording = nullptr);
 
 }  // namespace hotgauge::app

@@ -25,6 +25,7 @@ int main(int argc, char** argv) {
     add(hotgauge::app::add_grab);
     add(hotgauge::app::add_plc);
     add(hotgauge::app::add_calibrate);
+    add(hotgauge::app::add_verify);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
