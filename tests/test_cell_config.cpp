@@ -98,6 +98,12 @@ TEST(DaemonConfig, MistakesAreNamedWithFileLineAndKey) {
     EXPECT_NE(e.find("accelerometer.source"), std::string::npos) << e;
     e = error_with("  id: 127.0.0.2", "  name: 127.0.0.2");
     EXPECT_NE(e.find("camera"), std::string::npos) << e;
+    // Master slots (docs/verification.md): a certificate for a slot that has a recipe.
+    EXPECT_EQ(error_with("", "masters: {1: " + kConfigDir + "/calibration.yaml}"), "");
+    e = error_with("", "masters: {9: " + kConfigDir + "/calibration.yaml}");
+    EXPECT_NE(e.find("masters: slot 9 has no recipe"), std::string::npos) << e;
+    e = error_with("", "masters: {1: /nonexistent/master.yaml}");
+    EXPECT_NE(e.find("masters: /nonexistent/master.yaml does not exist"), std::string::npos) << e;
 }
 
 // The geometry moved from the simulator's cell config to the calibration, the clock offset

@@ -176,6 +176,48 @@ TEST(ResultsLog, ARecipeWithOtherFeaturesGetsItsOwnCsv) {
     EXPECT_EQ(lines(log->last_jsonl()).size(), 2u);  // one JSON file for the day
 }
 
+// A master check (docs/verification.md): its row in the day's verification CSV, with its own
+// header, the part CSV untouched, and the verification in the part's JSON line.
+TEST(ResultsLog, AMasterCheckIsAVerificationRow) {
+    test::TempDir tmp;
+    auto log = results::ResultsLog::open({tmp.path / "results", false});
+    ASSERT_TRUE(log.ok());
+    const auto a = part("A-1", 3, 60.0), m = part("M-0001", 3, 60.0);
+    core::MasterCertificate cert;
+    cert.master = "M-0001";
+    cert.recipe = "hub-a";
+    cert.certified_at = "2026-11-20";
+    cert.features = {{"Diameter 1", 60.0123, 0.001, std::nullopt},
+                     {"Diameter 3", 62.0523, 0.001, std::nullopt}};
+    auto v = pipeline::verify(m, cert);
+    ASSERT_TRUE(v.ok()) << v.error().message;
+    EXPECT_FALSE(v->passed);  // Diameter 3 is 0.04 mm off
+    ASSERT_TRUE(log->append({kNoon, 1, &a, "v", "h", std::nullopt}).ok());
+    results::ResultEntry e{kNoon, 2, &m, "v", "h", std::nullopt};
+    e.verification = &*v;
+    ASSERT_TRUE(log->append(e).ok());
+    EXPECT_EQ(log->last_csv().filename().string(),
+              results::local_date(kNoon) + ".verification.csv");
+    const auto rows = lines(log->last_csv());
+    ASSERT_EQ(rows.size(), 2u);
+    EXPECT_EQ(rows[0],
+              "time,sequence,master,part_id,recipe,passed,Diameter 1 certified_mm,Diameter 1 "
+              "deviation_mm,Diameter 1 passed,Diameter 3 certified_mm,Diameter 3 deviation_mm,"
+              "Diameter 3 passed");
+    EXPECT_NE(rows[1].find(",2,M-0001,M-0001,hub-a,no,60.0123,0.0000,yes,62.0523,-0.0400,no"),
+              std::string::npos)
+        << rows[1];
+    EXPECT_EQ(lines(tmp.path / "results" / (results::local_date(kNoon) + ".csv")).size(), 2u);
+    const auto json = lines(log->last_jsonl());
+    ASSERT_EQ(json.size(), 2u);
+    EXPECT_EQ(json[0].find("\"verification\""), std::string::npos);
+    const auto j = nlohmann::json::parse(json[1]);
+    EXPECT_EQ(j["verification"]["master"], "M-0001");
+    EXPECT_EQ(j["verification"]["passed"], false);
+    EXPECT_EQ(j["verification"]["features"][1]["reason"],
+              "deviation -0.0400 mm outside ±0.0200 mm");
+}
+
 core::Recording small_recording(const std::string& id) {
     core::Recording rec;
     rec.part_id = id;

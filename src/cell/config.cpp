@@ -169,8 +169,8 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
     return y.guarded<DaemonConfig>([&] {
         const YAML::Node root = y.load();
         y.expect_map(root, "hotgauged",
-                     {"calibration", "faces", "recipes", "models", "camera", "accelerometer",
-                      "axis", "plc", "pyrometer", "results",
+                     {"calibration", "faces", "recipes", "models", "masters", "camera",
+                      "accelerometer", "axis", "plc", "pyrometer", "results",
                       "cell"});  // cell: moved to the calibration, refused below by name
         DaemonConfig c;
         c.file = file;
@@ -198,6 +198,15 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
                 if (!c.recipes.count(slot))
                     y.fail(kv.first, "models: slot " + std::to_string(slot) + " has no recipe");
                 c.models[slot] = existing(y, kv.second, "models", base);
+            }
+        }
+        if (const YAML::Node m = root["masters"]) {
+            if (!m.IsMap()) y.fail(m, "masters: expected slot: certificate pairs");
+            for (const auto& kv : m) {
+                const auto slot = static_cast<int>(y.integer(kv.first, "masters: slot"));
+                if (!c.recipes.count(slot))
+                    y.fail(kv.first, "masters: slot " + std::to_string(slot) + " has no recipe");
+                c.masters[slot] = existing(y, kv.second, "masters", base);
             }
         }
         c.faces = root["faces"] ? y.strings(root["faces"], "faces")

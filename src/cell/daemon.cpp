@@ -13,10 +13,12 @@
 #include "hotgauge/cell/axis.hpp"
 #include "hotgauge/cell/journal.hpp"
 #include "hotgauge/core/clock.hpp"
+#include "hotgauge/io/certificate.hpp"
 #include "hotgauge/io/model_io.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/measure/features.hpp"
 #include "hotgauge/pipeline/pipeline.hpp"
+#include "hotgauge/pipeline/verify.hpp"
 #include "hotgauge/plc/pyrometer.hpp"
 #include "hotgauge/plc/server.hpp"
 #include "hotgauge/results/archive.hpp"
@@ -143,6 +145,15 @@ core::Result<std::shared_ptr<const Setup>> load_setup(const fs::path& config_fil
         s->models.emplace(slot, std::move(model));
         s->recipes.emplace(slot, std::move(*recipe));
     }
+    for (const auto& [slot, path] : s->config.masters) {
+        auto cert = io::read_certificate(path);
+        if (!cert) return cert.error();
+        if (cert->recipe != s->recipes.at(slot).name)
+            return core::make_error(path.string() + ": master of recipe '" + cert->recipe +
+                                    "', recipe slot " + std::to_string(slot) + " is '" +
+                                    s->recipes.at(slot).name + "'");
+        s->masters.emplace(slot, std::move(*cert));
+    }
     auto tri = calib::triangulation(s->calibration.sensor);
     if (!tri)
         return core::make_error(s->config.calibration_file.string() + ": " + tri.error().message);
@@ -166,9 +177,14 @@ std::string describe(const Setup& s) {
     o << "  faces";
     for (const auto& f : c.faces) o << " " << f;
     o << "\n";
-    for (const auto& [slot, r] : s.recipes)
+    for (const auto& [slot, r] : s.recipes) {
         o << "  recipe slot " << slot << ": " << r.name << " (" << r.features.size()
-          << " features), model " << s.models.at(slot)->refs.size() << " references\n";
+          << " features), model " << s.models.at(slot)->refs.size() << " references";
+        if (auto m = s.masters.find(slot); m != s.masters.end())
+            o << "; master " << m->second.master << " (certified " << m->second.certified_at << ", "
+              << m->second.features.size() << " features)";
+        o << "\n";
+    }
     o << "  camera " << c.acquisition.camera.id << " (" << c.acquisition.scan.frame_mode
       << " mode), " << c.acquisition.scan_s << " s per face\n";
     o << "  accelerometer "
@@ -648,8 +664,23 @@ std::string Daemon::Impl::publish(const Captured& c, const pipeline::PartResult&
 void Daemon::Impl::process(Captured c) {
     const Job& job = c.job;
     prepare_results(job.setup);
+    const auto master = job.setup->masters.find(job.trigger.recipe_slot);
+    const bool is_master = master != job.setup->masters.end();
+    if (is_master && !c.rec.temperature_c) c.rec.temperature_c = master->second.temperature_c;
     const auto t0 = Clock::now();
-    const pipeline::PartResult r = measure_captured(c);
+    pipeline::PartResult r = measure_captured(c);
+    // A master's overall verdict is the verification's (docs/verification.md).
+    std::optional<pipeline::Verification> verification;
+    if (is_master && !c.fault) {
+        if (auto v = pipeline::verify(r, master->second)) {
+            verification = std::move(*v);
+            r.measurement.verdict =
+                verification->passed ? measure::Verdict::kOk : measure::Verdict::kNok;
+        } else {
+            r.warnings.push_back("master check: " + v.error().message);
+            r.measurement.verdict = measure::Verdict::kNotMeasured;
+        }
+    }
     const double pipeline_ms = ms_between(t0, Clock::now());
     const auto t1 = Clock::now();
     const std::int64_t t_result = core::realtime_ns();
@@ -657,6 +688,7 @@ void Daemon::Impl::process(Captured c) {
     entry.time_ns = t_result;
     entry.sequence = job.sequence;
     entry.result = &r;
+    entry.verification = verification ? &*verification : nullptr;
     entry.software_version = HOTGAUGE_VERSION;
     entry.config_hash = job.setup->config.hash;
     // The raw recording is written after the registers (it is large, and the PLC is waiting);
@@ -689,6 +721,9 @@ void Daemon::Impl::process(Captured c) {
     std::ostringstream msg;
     msg << "part " << r.part_id << " seq " << job.sequence << " recipe " << r.recipe << ": "
         << outcome;
+    if (is_master)
+        msg << "; master " << master->second.master << " check "
+            << (verification ? (verification->passed ? "passed" : "FAILED") : "not made");
     if (c.last_profile_ns)
         msg << "; " << (published - c.last_profile_ns) / 1'000'000
             << " ms after the last profile (accelerometer margin " << std::lround(c.accel_wait_ms)

@@ -97,6 +97,27 @@ std::string csv_row(const ResultEntry& e) {
     return row;
 }
 
+std::string verification_csv_header(const pipeline::Verification& v) {
+    std::string h = "time,sequence,master,part_id,recipe,passed";
+    for (const auto& f : v.features) {
+        h += "," + cell(f.name + " certified_mm");
+        h += "," + cell(f.name + " deviation_mm");
+        h += "," + cell(f.name + " passed");
+    }
+    return h;
+}
+
+std::string verification_csv_row(const ResultEntry& e) {
+    const auto& v = *e.verification;
+    std::string row = local_iso8601(e.time_ns) + "," + std::to_string(e.sequence) + "," +
+                      cell(v.master) + "," + cell(e.result->part_id) + "," +
+                      cell(e.result->recipe) + "," + (v.passed ? "yes" : "no");
+    for (const auto& f : v.features)
+        row += "," + number(std::optional<double>(f.certified_mm), 4) + "," +
+               number(f.deviation_mm, 4) + "," + (f.passed ? "yes" : "no");
+    return row;
+}
+
 std::string jsonl_line(const ResultEntry& e) {
     nlohmann::json j;
     j["time"] = local_iso8601(e.time_ns);
@@ -106,6 +127,8 @@ std::string jsonl_line(const ResultEntry& e) {
     j["config_hash"] = e.config_hash;
     j["archived_as"] = e.archived_as ? nlohmann::json(*e.archived_as) : nlohmann::json();
     j["part"] = nlohmann::json::parse(pipeline::to_json(*e.result));
+    if (e.verification)
+        j["verification"] = nlohmann::json::parse(pipeline::to_json(*e.verification));
     return j.dump();  // one line: no indentation, line breaks in strings escaped
 }
 
@@ -268,13 +291,16 @@ core::Result<void> ResultsLog::write_line(OpenFile& f, const std::filesystem::pa
 core::Result<void> ResultsLog::append(const ResultEntry& e) {
     if (!e.result) return core::make_error("results: an entry without a result");
     const std::string date = local_date(e.time_ns);
-    const std::string header = csv_header(*e.result);
-    std::filesystem::path csv = config_.dir / (date + ".csv");
+    const std::string header =
+        e.verification ? verification_csv_header(*e.verification) : csv_header(*e.result);
+    std::filesystem::path csv =
+        config_.dir / (date + (e.verification ? ".verification.csv" : ".csv"));
     auto f = file(csv);
     if (!f) return f.error();
     if (!(*f)->header.empty() && (*f)->header != header) {
         // Another recipe's features: its own file, so that every column keeps one meaning.
-        csv = config_.dir / (date + "." + e.result->recipe + ".csv");
+        csv = config_.dir /
+              (date + "." + e.result->recipe + (e.verification ? ".verification.csv" : ".csv"));
         f = file(csv);
         if (!f) return f.error();
     }
@@ -288,7 +314,8 @@ core::Result<void> ResultsLog::append(const ResultEntry& e) {
     auto j = file(jsonl);
     if (!j) return j.error();
     if (auto ok = write_line(**j, jsonl, jsonl_line(e)); !ok) return ok;
-    if (auto ok = write_line(**f, csv, csv_row(e)); !ok) return ok;
+    if (auto ok = write_line(**f, csv, e.verification ? verification_csv_row(e) : csv_row(e)); !ok)
+        return ok;
     last_csv_ = csv;
     last_jsonl_ = jsonl;
     return {};

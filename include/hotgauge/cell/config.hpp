@@ -43,7 +43,10 @@ struct DaemonConfig {
     std::filesystem::path calibration_file;        // the cell's measured geometry (calib)
     std::map<int, std::filesystem::path> recipes;  // PLC recipe slot -> recipe file
     std::map<int, std::filesystem::path> models;   // optional saved .hgm models per slot
-    std::vector<std::string> faces;                // scan order for "all faces"
+    // Master slots (docs/verification.md): slot -> the master's certificate; the slot's recipe
+    // measures it and the result is a verification.
+    std::map<int, std::filesystem::path> masters;
+    std::vector<std::string> faces;  // scan order for "all faces"
     AcquisitionConfig acquisition;
     std::optional<accel::AccelSourceConfig> accelerometer;  // absent: no compensation
     double accel_margin_s = 0.75;

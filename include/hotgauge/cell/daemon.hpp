@@ -26,6 +26,7 @@
 #include "hotgauge/acquire/triangulation.hpp"
 #include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/cell/config.hpp"
+#include "hotgauge/core/master.hpp"
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/result.hpp"
 #include "hotgauge/match/model.hpp"
@@ -40,6 +41,7 @@ struct Setup {
     calib::Calibration calibration;
     std::map<int, core::Recipe> recipes;                        // by PLC recipe slot
     std::map<int, std::shared_ptr<const match::Model>> models;  // by slot
+    std::map<int, core::MasterCertificate> masters;             // master slots
     std::optional<acquire::Triangulation> triangulation;
     acquire::ExposureTable exposure;
 };

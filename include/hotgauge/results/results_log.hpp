@@ -16,6 +16,7 @@
 
 #include "hotgauge/core/result.hpp"
 #include "hotgauge/pipeline/pipeline.hpp"
+#include "hotgauge/pipeline/verify.hpp"
 
 namespace hotgauge::results {
 
@@ -32,6 +33,9 @@ struct ResultEntry {
     std::string software_version;
     std::string config_hash;
     std::optional<std::string> archived_as;  // where the raw recording was kept, if it was
+    // A master part's check (docs/verification.md): its row goes to YYYY-MM-DD.verification.csv
+    // and its JSON line carries "verification".
+    const pipeline::Verification* verification = nullptr;
 };
 
 // Thread safety: one thread appends.
@@ -73,6 +77,8 @@ class ResultsLog {
 std::string csv_header(const pipeline::PartResult& result);
 std::string csv_row(const ResultEntry& entry);
 std::string jsonl_line(const ResultEntry& entry);
+std::string verification_csv_header(const pipeline::Verification& verification);
+std::string verification_csv_row(const ResultEntry& entry);  // entry.verification set
 // The sequence number of the newest part in the results folder (the last line of the newest
 // day's JSON file that has one; only file tails are read), 0 when there is none: numbering goes
 // on from there after a restart.
