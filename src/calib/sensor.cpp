@@ -1,0 +1,154 @@
+#include "hotgauge/calib/sensor.hpp"
+
+#include <Eigen/SVD>
+#include <cmath>
+#include <limits>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "hotgauge/acquire/stripe.hpp"
+
+namespace hotgauge::calib {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+cv::Mat camera_matrix(const PinholeCamera& c) {
+    return (cv::Mat_<double>(3, 3) << c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1);
+}
+
+cv::Mat distortion(const PinholeCamera& c) {
+    return (cv::Mat_<double>(1, 5) << c.distortion[0], c.distortion[1], c.distortion[2],
+            c.distortion[3], c.distortion[4]);
+}
+
+// The undistorted ray directions (z = 1) of pixels.
+std::vector<cv::Point2d> rays(const PinholeCamera& c, const std::vector<cv::Point2d>& px) {
+    std::vector<cv::Point2d> out;
+    if (px.empty()) return out;
+    cv::undistortPoints(
+        px, out, camera_matrix(c), distortion(c), cv::noArray(), cv::noArray(),
+        cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-12));
+    return out;
+}
+
+std::vector<cv::Point3f> board_points(const Checkerboard& b) {
+    std::vector<cv::Point3f> p;
+    for (int j = 0; j < b.rows; ++j)
+        for (int i = 0; i < b.cols; ++i)
+            p.emplace_back(static_cast<float>(i * b.square_mm), static_cast<float>(j * b.square_mm),
+                           0.0f);
+    return p;
+}
+
+// The laser points of one view in the camera frame: the stripe's pixels back-projected onto the
+// board's plane (its pose from solvePnP).
+std::vector<Eigen::Vector3d> laser_points(const PinholeCamera& cam, const GrayImage& laser,
+                                          const cv::Mat& rvec, const cv::Mat& tvec) {
+    const std::vector<double> rows = stripe_rows(laser);
+    std::vector<cv::Point2d> px;
+    for (std::size_t u = 0; u < rows.size(); ++u)
+        if (std::isfinite(rows[u])) px.emplace_back(static_cast<double>(u), rows[u]);
+    cv::Mat R;
+    cv::Rodrigues(rvec, R);
+    const Eigen::Vector3d n(R.at<double>(0, 2), R.at<double>(1, 2), R.at<double>(2, 2));
+    const Eigen::Vector3d t(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
+    std::vector<Eigen::Vector3d> out;
+    for (const auto& r : rays(cam, px)) {
+        const Eigen::Vector3d d(r.x, r.y, 1.0);
+        out.push_back(d * (n.dot(t) / n.dot(d)));
+    }
+    return out;
+}
+
+}  // namespace
+
+std::vector<double> stripe_rows(const GrayImage& img) {
+    acquire::StripeConfig c;  // the acquisition's stripe extraction, 8-bit, Gaussian peak fit
+    c.max_value = 255;
+    c.gaussian_refinement = true;
+    const auto points =
+        acquire::extract_stripe(img.pixels.data(), img.width, img.height, img.width, c);
+    std::vector<double> out(points.size(), kNaN);
+    for (std::size_t u = 0; u < points.size(); ++u)
+        if (points[u].status == acquire::StripeStatus::kOk) out[u] = points[u].row;
+    return out;
+}
+
+Eigen::Vector3d triangulate(const PinholeCamera& c, const LaserPlane& p, double u, double v) {
+    const auto r = rays(c, {cv::Point2d(u, v)});
+    const Eigen::Vector3d d(r[0].x, r[0].y, 1.0);
+    const double den = p.normal.dot(d);
+    if (std::abs(den) < 1e-12) return Eigen::Vector3d::Constant(kNaN);
+    const double t = p.offset_mm / den;
+    return t > 0 ? Eigen::Vector3d(t * d) : Eigen::Vector3d::Constant(kNaN);
+}
+
+core::Result<SensorCalibration> calibrate_sensor(const std::vector<TargetView>& views,
+                                                 const Checkerboard& b) {
+    if (views.size() < 3)
+        return core::make_error("sensor calibration: " + std::to_string(views.size()) +
+                                " views; at least 3 board poses are needed");
+    const cv::Size pattern(b.cols, b.rows);
+    auto mat = [](const GrayImage& g) {  // a view of the pixels, no copy
+        return cv::Mat(g.height, g.width, CV_8UC1, const_cast<std::uint8_t*>(g.pixels.data()));
+    };
+    std::vector<std::vector<cv::Point2f>> corners;
+    for (std::size_t i = 0; i < views.size(); ++i) {
+        std::vector<cv::Point2f> c;
+        if (views[i].board.empty() ||
+            !cv::findChessboardCorners(mat(views[i].board), pattern, c,
+                                       cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE))
+            return core::make_error("sensor calibration: target not found in image " +
+                                    std::to_string(i + 1) + " (" + std::to_string(b.cols) + " × " +
+                                    std::to_string(b.rows) + " inner corners)");
+        cv::cornerSubPix(
+            mat(views[i].board), c, cv::Size(11, 11), cv::Size(-1, -1),
+            cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-4));
+        corners.push_back(std::move(c));
+    }
+    const std::vector<std::vector<cv::Point3f>> objects(views.size(), board_points(b));
+    const cv::Size size(views.front().board.width, views.front().board.height);
+    cv::Mat K, dist;
+    std::vector<cv::Mat> rvecs, tvecs;
+    SensorCalibration out;
+    out.views = static_cast<int>(views.size());
+    out.reprojection_rms_px = cv::calibrateCamera(
+        objects, corners, size, K, dist, rvecs, tvecs, 0,
+        cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 300, 1e-16));
+    PinholeCamera& cam = out.camera;
+    cam.width = size.width;
+    cam.height = size.height;
+    cam.fx = K.at<double>(0, 0);
+    cam.fy = K.at<double>(1, 1);
+    cam.cx = K.at<double>(0, 2);
+    cam.cy = K.at<double>(1, 2);
+    for (int k = 0; k < 5; ++k) cam.distortion[k] = dist.at<double>(0, k);
+
+    std::vector<Eigen::Vector3d> pts;
+    for (std::size_t i = 0; i < views.size(); ++i) {
+        if (views[i].laser.empty()) continue;
+        auto p = laser_points(cam, views[i].laser, rvecs[i], tvecs[i]);
+        if (p.size() < 50)
+            return core::make_error("sensor calibration: no laser line in laser image " +
+                                    std::to_string(i + 1));
+        pts.insert(pts.end(), p.begin(), p.end());
+    }
+    if (pts.size() < 100) return core::make_error("sensor calibration: no laser images");
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& p : pts) mean += p / static_cast<double>(pts.size());
+    Eigen::Matrix3d S = Eigen::Matrix3d::Zero();
+    for (const auto& p : pts) S += (p - mean) * (p - mean).transpose();
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(S, Eigen::ComputeFullU);
+    if (!(svd.singularValues()(1) > 1e-3 * svd.singularValues()(0)))
+        return core::make_error(
+            "sensor calibration: the laser lines lie on one line: tilt the board between views");
+    out.plane.normal = svd.matrixU().col(2);
+    out.plane.offset_mm = out.plane.normal.dot(mean);
+    if (out.plane.offset_mm < 0) out.plane.normal *= -1.0, out.plane.offset_mm *= -1.0;
+    out.plane_rms_mm = std::sqrt(svd.singularValues()(2) / static_cast<double>(pts.size()));
+    out.laser_points = static_cast<int>(pts.size());
+    return out;
+}
+
+}  // namespace hotgauge::calib
