@@ -69,6 +69,38 @@ TEST(SensorCalibration, RecoversTheVirtualSensorsCameraAndLaserPlane) {
     // Issue 16 asks for 5 µm; this gives 58 µm RMS, 81 µm worst (docs/calibration.md "Sensor":
     // the depth scale is noise-limited). The bound guards the figure; the target is not met.
     EXPECT_LT(worst, 0.12);
+
+    // Fitted into the acquisition's calibrated model: the same points through it, against the
+    // calibration it was fitted to (what the fit adds) and against the truth.
+    auto fit = calib::fit_triangulation(*cal);
+    ASSERT_TRUE(fit) << fit.error().message;
+    auto tri = hotgauge::acquire::Triangulation::calibrated(fit->model);
+    ASSERT_TRUE(tri) << tri.error().message;
+    const Eigen::Isometry3d T_camera_laser = calib::laser_frame(*cal).inverse();
+    double fit_worst = 0.0, total_worst = 0.0;
+    for (int v_px = 16; v_px < head.camera.height - 16; v_px += 32)
+        for (int u_px = 16; u_px < head.camera.width - 16; u_px += 32) {
+            const Eigen::Vector3d truth = calib::triangulate(head.camera, head.plane, u_px, v_px);
+            const Eigen::Vector3d in_laser = head.T_laser_camera * truth;
+            if (!truth.allFinite() || in_laser.z() < cell->sensor.min_range_mm ||
+                in_laser.z() > cell->sensor.max_range_mm)
+                continue;
+            const auto p = tri->to_camera(u_px, v_px);
+            if (!std::isfinite(p.x_mm)) continue;
+            const Eigen::Vector3d model = T_camera_laser * Eigen::Vector3d(p.x_mm, 0, p.z_mm);
+            fit_worst =
+                std::max(fit_worst,
+                         (model - calib::triangulate(cal->camera, cal->plane, u_px, v_px)).norm());
+            total_worst = std::max(total_worst, (model - truth).norm());
+        }
+    std::printf(
+        "calibrated model (degree 3): fit rms z %.2f µm, x %.2f µm; through it, worst %.2f "
+        "µm from the calibration, %.2f µm from the truth\n",
+        fit->rms_z_mm * 1e3, fit->rms_x_mm * 1e3, fit_worst * 1e3, total_worst * 1e3);
+    // Its range law follows the calibration (z to 0.1 µm RMS); its x law, one ray per column
+    // (u − u0)·pitch·z/ref, cannot follow the lens's distortion: 128 µm RMS in x. Issue 16's
+    // "fitted into the calibrated model" needs per-column x there (docs/calibration.md).
+    EXPECT_LT(fit->rms_z_mm, 0.001);
 }
 
 TEST(SensorCalibration, RefusesWhatCannotCalibrate) {

@@ -84,6 +84,40 @@ Eigen::Vector3d triangulate(const PinholeCamera& c, const LaserPlane& p, double 
     return t > 0 ? Eigen::Vector3d(t * d) : Eigen::Vector3d::Constant(kNaN);
 }
 
+Eigen::Isometry3d laser_frame(const SensorCalibration& c) {
+    const Eigen::Vector3d y = c.plane.normal;
+    const Eigen::Vector3d x = (Eigen::Vector3d::UnitX() - y * y.x()).normalized();
+    Eigen::Vector3d z = x.cross(y);
+    if (z.z() < 0) z = -z;
+    Eigen::Matrix3d R_camera_laser;
+    R_camera_laser << x, z.cross(x), z;
+    // Every column's plane holds the camera's y axis through the centre: origin where it meets
+    // the laser plane.
+    const Eigen::Vector3d origin = Eigen::Vector3d::UnitY() * (c.plane.offset_mm / y.y());
+    Eigen::Isometry3d T_camera_laser = Eigen::Isometry3d::Identity();
+    T_camera_laser.linear() = R_camera_laser;
+    T_camera_laser.translation() = origin;
+    return T_camera_laser.inverse();
+}
+
+core::Result<acquire::CalibrationFit> fit_triangulation(const SensorCalibration& c, int step,
+                                                        int degree) {
+    const Eigen::Isometry3d T_laser_camera = laser_frame(c);
+    std::vector<acquire::CalibrationSample> samples;
+    for (int v = 0; v < c.camera.height; v += step)
+        for (int u = 0; u < c.camera.width; ++u) {
+            const Eigen::Vector3d X = triangulate(c.camera, c.plane, u, v);
+            if (!X.allFinite()) continue;
+            const Eigen::Vector3d L = T_laser_camera * X;
+            samples.push_back({static_cast<double>(u), static_cast<double>(v), L.x(), L.z()});
+        }
+    acquire::CalibrationOptions o;
+    o.width_px = c.camera.width;
+    o.height_px = c.camera.height;
+    o.degree = degree;
+    return acquire::fit_calibrated_model(samples, o);
+}
+
 core::Result<SensorCalibration> calibrate_sensor(const std::vector<TargetView>& views,
                                                  const Checkerboard& b) {
     if (views.size() < 3)

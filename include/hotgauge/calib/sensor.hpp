@@ -63,6 +63,18 @@ core::Result<SensorCalibration> calibrate_sensor(const std::vector<TargetView>& 
 Eigen::Vector3d triangulate(const PinholeCamera& camera, const LaserPlane& plane, double u_px,
                             double v_px);
 
+// The laser frame of a calibrated head, as the profiles use it (y the plane's normal, x the
+// camera's x in the plane, z away from the camera, the origin where every image column's plane
+// meets the laser plane, so that each column is a ray from it): camera frame → laser frame.
+// Any rigid choice would do (the faces' alignment absorbs it); this one makes each column a ray.
+Eigen::Isometry3d laser_frame(const SensorCalibration& calibration);
+
+// The calibration as the acquisition's calibrated triangulation model (acquire::CalibratedModel,
+// a rational function of the row per column): sampled every `step_px` over the image, the
+// points in laser_frame's coordinates, fitted by acquire::fit_calibrated_model.
+core::Result<acquire::CalibrationFit> fit_triangulation(const SensorCalibration& calibration,
+                                                        int step_px = 8, int degree = 3);
+
 // Per column of a laser image: the stripe's sub-pixel row by the acquisition's own extraction
 // (acquire::extract_stripe, Gaussian 3-point refinement), NaN where the column has no stripe.
 std::vector<double> stripe_rows(const GrayImage& laser);
