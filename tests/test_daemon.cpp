@@ -214,5 +214,41 @@ TEST(Daemon, ASetupWithAMissingRecipeIsAnErrorNamingIt) {
         << setup.error().message;
 }
 
+// A master slot's certificate must fit its recipe (docs/verification.md): another recipe's, or
+// one certifying a feature the recipe lacks, is refused at start, naming the file; a fitting
+// one loads and is described.
+TEST(Daemon, AMasterCertificateMustFitItsSlotsRecipe) {
+    test::TempDir dir;
+    const auto cert = dir.path / "master.yaml";
+    const auto config = dir.path / "hotgauged.yaml";
+    write(config, config_text(dir.path / "results") + "masters:\n  1: " + cert.string() + "\n");
+    const std::string head =
+        "format: hotgauge-master-1\nmaster: M-1\ncertified_at: \"2026-11-20\"\n"
+        "certified_by: lab\ntemperature_c: 20.0\ntolerance_mm: 0.02\n";
+    write(
+        cert,
+        head + "recipe: hub-b\nfeatures: [{name: \"Diameter 1\", value_mm: 138.4, u_mm: 0.001}]\n");
+    auto setup = cell::load_setup(config);
+    ASSERT_FALSE(setup);
+    EXPECT_NE(setup.error().message.find("master of recipe 'hub-b', recipe slot 1 is 'hub-a'"),
+              std::string::npos)
+        << setup.error().message;
+    write(cert,
+          head + "recipe: hub-a\nfeatures: [{name: \"Diameter 9\", value_mm: 1.0, u_mm: 0.001}]\n");
+    setup = cell::load_setup(config);
+    ASSERT_FALSE(setup);
+    EXPECT_NE(setup.error().message.find("certified feature 'Diameter 9' is not in recipe hub-a"),
+              std::string::npos)
+        << setup.error().message;
+    write(
+        cert,
+        head + "recipe: hub-a\nfeatures: [{name: \"Diameter 1\", value_mm: 138.4, u_mm: 0.001}]\n");
+    setup = cell::load_setup(config);
+    ASSERT_TRUE(setup) << setup.error().message;
+    EXPECT_NE(cell::describe(**setup).find("master M-1 (certified 2026-11-20, 1 features)"),
+              std::string::npos)
+        << cell::describe(**setup);
+}
+
 }  // namespace
 }  // namespace hotgauge

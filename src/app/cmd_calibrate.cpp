@@ -3,8 +3,8 @@
 //                  runs on before it is commissioned; the daemon says so at start.
 //   faces          every face's pose, scan direction and travel scale from a scan of an
 //                  artifact, and the accelerometer's mount and bias from gravity in it.
-//   clock          the camera → accelerometer clock offset from the artifact's plate scanned
-//                  with the press running, after `faces`.
+//   clock          the camera → accelerometer clock offset from the artifact (spheres and
+//                  plate) scanned with the press running, after `faces`.
 //   virtual-truth  a seeded true geometry for the virtual cell, off nominal as a real cell is.
 #include <spdlog/spdlog.h>
 
@@ -138,8 +138,8 @@ Command add_calibrate(CLI::App& app) {
         ->capture_default_str();
     faces->add_option("--out,-o", a->out, "calibration file to write")->required();
     auto* clock = s->add_subcommand(
-        "clock", "the camera → accelerometer clock offset from the plate under press vibration");
-    clock->add_option("--artifact", a->artifact, "artifact file (its first plane: the plate)")
+        "clock", "the camera → accelerometer clock offset from the artifact under press vibration");
+    clock->add_option("--artifact", a->artifact, "artifact file (its spheres and planes)")
         ->required();
     clock->add_option("recording", a->recording, "the artifact scanned with the press running")
         ->required();

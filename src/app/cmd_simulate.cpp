@@ -155,6 +155,12 @@ int run(const SimulateArgs& a) {
         opt.T_world_part = T;
     }
 
+    if (a.serve && !a.artifact.empty()) {
+        spdlog::error(
+            "simulate: --artifact writes a recording; the virtual cell (--serve) "
+            "serves parts");
+        return 2;
+    }
     if (a.serve) return serve(a, *recipe, c, opt);
     if (a.out.empty()) {
         spdlog::error("simulate: --out is required (or --serve)");

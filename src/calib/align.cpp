@@ -141,6 +141,9 @@ core::Result<FaceAlignment> align_face(const Artifact& a, const core::FaceScan& 
         if (settled && step->head<3>().norm() < 1e-9 && step->tail<6>().norm() < 1e-6) break;
         gate = std::min(gate, std::max(floor_mm, 4.0 * as.rms_mm));
     }
+    if (out.iterations > 60)
+        return core::make_error(w + "the fit did not settle in 60 iterations (residual RMS " +
+                                std::to_string(as.rms_mm) + " mm)");
     as = assign(a, pts, pose, gate);
     out.rms_mm = as.rms_mm;
     for (std::size_t j = 0; j < as.counts.size(); ++j) {
@@ -196,6 +199,10 @@ core::Result<AccelMount> estimate_accel_mount(const core::Recording& rec,
         D.push_back(g->T_world_camera.linear().transpose() * Eigen::Vector3d(0, 0, kG));
         G.push_back(mean);
     }
+    if (D.size() < 3)
+        return core::make_error("accelerometer: " + std::to_string(D.size()) +
+                                " face(s); gravity fixes the mount and bias from 3 or more faces "
+                                "whose gravity directions are not on one line");
     Eigen::Vector3d d_mean = Eigen::Vector3d::Zero(), g_mean = Eigen::Vector3d::Zero();
     for (std::size_t j = 0; j < D.size(); ++j) {
         d_mean += D[j] / static_cast<double>(D.size());
@@ -206,8 +213,8 @@ core::Result<AccelMount> estimate_accel_mount(const core::Recording& rec,
     const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
     if (!(svd.singularValues()(1) > 0.1 * kG * kG))
         return core::make_error(
-            "the faces' orientations span fewer than two axes: gravity cannot fix the "
-            "accelerometer's mount (scan faces that look in different directions)");
+            "accelerometer: the faces' gravity directions lie on one line: gravity cannot fix the "
+            "mount (scan 3 or more faces that look in different directions)");
     Eigen::Matrix3d S = Eigen::Matrix3d::Identity();
     S(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() > 0 ? 1.0 : -1.0;
     const Eigen::Matrix3d Q = svd.matrixV() * S * svd.matrixU().transpose();  // D → G: R_caᵀ

@@ -77,21 +77,25 @@ FaceSums face_sums(const core::FaceScan& f, const Artifact& a,
 std::vector<double> block_costs(const std::vector<FaceSums>& faces,
                                 compensate::CompensationConfig config, double offset_s) {
     std::vector<double> cost(faces.size() * kBlocksPerFace, 0.0);
+    std::vector<int> counted(cost.size(), 0), all(cost.size(), 0);
     config.clock_offset_s = offset_s;
     for (std::size_t j = 0; j < faces.size(); ++j) {
         const auto c = compensate::compensate_face(*faces[j].face, config);
         const auto& ps = faces[j].profiles;
         for (std::size_t q = 0; q < ps.size(); ++q) {
+            const std::size_t b = j * kBlocksPerFace + q * kBlocksPerFace / ps.size();
+            ++all[b];
             const auto k = static_cast<std::size_t>(ps[q].k);
-            const Eigen::Vector3d u =
-                c.applied && !c.profile_degraded[k]
-                    ? c.u_mm[k]
-                    : Eigen::Vector3d(std::numeric_limits<double>::quiet_NaN(), 0, 0);
-            if (!u.allFinite()) continue;  // an uncompensated profile counts at no offset
-            cost[j * kBlocksPerFace + q * kBlocksPerFace / ps.size()] +=
-                ps[q].c + 2.0 * u.dot(ps[q].b) + u.dot(ps[q].M * u);
+            if (!c.applied || c.profile_degraded[k]) continue;  // not compensated at this offset
+            const Eigen::Vector3d& u = c.u_mm[k];
+            cost[b] += ps[q].c + 2.0 * u.dot(ps[q].b) + u.dot(ps[q].M * u);
+            ++counted[b];
         }
     }
+    // Per profile counted, scaled to all: an offset that leaves profiles out (near a gap or the
+    // record's end) must not look better for it.
+    for (std::size_t b = 0; b < cost.size(); ++b)
+        cost[b] = counted[b] ? cost[b] / counted[b] * all[b] : 0.0;
     return cost;
 }
 
@@ -203,6 +207,9 @@ core::Result<ClockOffset> estimate_clock_offset(const core::Recording& rec, cons
         return core::make_error("no face's points fit the artifact once compensated");
     const Search fine =
         search(faces, config, coarse.best - kFineSpanS, coarse.best + kFineSpanS, kFineStepS);
+    if (fine.at_edge)
+        return core::make_error(
+            "the clock offset did not settle: the fine search ended at its edge");
     out.profiles = 0;
     for (const auto& fs : faces) out.profiles += static_cast<int>(fs.profiles.size());
     out.offset_ns = applied + std::llround(fine.best * 1e9);

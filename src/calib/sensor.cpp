@@ -102,6 +102,10 @@ Eigen::Isometry3d laser_frame(const SensorCalibration& c) {
 
 core::Result<acquire::CalibrationFit> fit_triangulation(const SensorCalibration& c, int step,
                                                         int degree) {
+    if (std::abs(c.plane.normal.y()) < 0.05 || std::abs(c.plane.normal.x()) > 0.99)
+        return core::make_error(
+            "sensor calibration: the laser plane is not across the camera's rows (its normal " +
+            std::string("must have a y component): the head's camera is turned on its axis"));
     const Eigen::Isometry3d T_laser_camera = laser_frame(c);
     std::vector<acquire::CalibrationSample> samples;
     for (int v = 0; v < c.camera.height; v += step)
@@ -123,6 +127,23 @@ core::Result<SensorCalibration> calibrate_sensor(const std::vector<TargetView>& 
     if (views.size() < 3)
         return core::make_error("sensor calibration: " + std::to_string(views.size()) +
                                 " views; at least 3 board poses are needed");
+    for (std::size_t i = 0; i < views.size(); ++i) {
+        const GrayImage& g = views[i].board;
+        const GrayImage& l = views[i].laser;
+        const std::string n = std::to_string(i + 1);
+        if (g.width <= 0 || g.height <= 0 ||
+            g.pixels.size() != static_cast<std::size_t>(g.width) * g.height)
+            return core::make_error("sensor calibration: image " + n + " has " +
+                                    std::to_string(g.pixels.size()) + " pixels, not " +
+                                    std::to_string(g.width) + " × " + std::to_string(g.height));
+        if (g.width != views[0].board.width || g.height != views[0].board.height)
+            return core::make_error("sensor calibration: image " + n +
+                                    " is not the size of image 1");
+        if (!l.empty() &&
+            (l.width != g.width || l.height != g.height || l.pixels.size() != g.pixels.size()))
+            return core::make_error("sensor calibration: laser image " + n +
+                                    " is not the size of its board image");
+    }
     const cv::Size pattern(b.cols, b.rows);
     auto mat = [](const GrayImage& g) {  // a view of the pixels, no copy
         return cv::Mat(g.height, g.width, CV_8UC1, const_cast<std::uint8_t*>(g.pixels.data()));

@@ -86,8 +86,9 @@ plc::Verdict to_plc(measure::Verdict v) {
     return plc::Verdict::kNotMeasured;
 }
 
-// The measurement as the PLC sees it: the cold value of each feature (what the tolerance is on).
-plc::PartResult to_plc(const pipeline::PartResult& r) {
+// The measurement as the PLC sees it: the cold value of each feature (what the tolerance is on);
+// a master check's overall verdict is the check's (docs/verification.md).
+plc::PartResult to_plc(const pipeline::PartResult& r, const pipeline::Verification* check) {
     plc::PartResult out;
     out.temperature_c = r.measurement.temperature_c;
     for (const auto& f : r.measurement.features) {
@@ -100,11 +101,12 @@ plc::PartResult to_plc(const pipeline::PartResult& r) {
         out.features.push_back(v);
     }
     out.overall = plc::overall_verdict(out.features, r.degraded);
+    if (check) out.overall = check->passed ? plc::Verdict::kOk : plc::Verdict::kNok;
     return out;
 }
 
-std::string verdict_text(const pipeline::PartResult& r) {
-    const plc::PartResult p = to_plc(r);
+std::string verdict_text(const pipeline::PartResult& r, const pipeline::Verification* check) {
+    const plc::PartResult p = to_plc(r, check);
     return plc::to_string(p.overall);
 }
 
@@ -152,6 +154,13 @@ core::Result<std::shared_ptr<const Setup>> load_setup(const fs::path& config_fil
             return core::make_error(path.string() + ": master of recipe '" + cert->recipe +
                                     "', recipe slot " + std::to_string(slot) + " is '" +
                                     s->recipes.at(slot).name + "'");
+        const core::Recipe& recipe = s->recipes.at(slot);
+        for (const auto& cf : cert->features)
+            if (std::none_of(recipe.features.begin(), recipe.features.end(),
+                             [&](const auto& f) { return f.name == cf.name; }))
+                return core::make_error(path.string() + ": certified feature '" + cf.name +
+                                        "' is not in recipe " + recipe.name + " (slot " +
+                                        std::to_string(slot) + ")");
         s->masters.emplace(slot, std::move(*cert));
     }
     auto tri = calib::triangulation(s->calibration.sensor);
@@ -289,7 +298,8 @@ struct Daemon::Impl {
     pipeline::PartResult measure_captured(const Captured& c) const;
     // The registers: the result, or the fault; returns the outcome for the log.
     std::string publish(const Captured& c, const pipeline::PartResult& r,
-                        const core::Result<void>& stored, bool& problem);
+                        const pipeline::Verification* check, const core::Result<void>& stored,
+                        bool& problem);
     void prepare_results(const std::shared_ptr<const Setup>& s);
     void finish_failed(Captured& c, pipeline::PartResult& r);
 };
@@ -637,13 +647,15 @@ pipeline::PartResult Daemon::Impl::measure_captured(const Captured& c) const {
 }
 
 std::string Daemon::Impl::publish(const Captured& c, const pipeline::PartResult& r,
+                                  const pipeline::Verification* check,
                                   const core::Result<void>& stored, bool& problem) {
     const Job& job = c.job;
     problem = true;
     if (abandoned == job.sequence) {
         // The PLC reset this cycle and has moved on: neither a result nor a fault of it may
         // reach the registers now.
-        return (c.fault ? std::string("NOT_MEASURED (") + c.failure + ")" : verdict_text(r)) +
+        return (c.fault ? std::string("NOT_MEASURED (") + c.failure + ")"
+                        : verdict_text(r, check)) +
                ", not published: the PLC reset the cycle";
     }
     if (!stored) {
@@ -655,10 +667,10 @@ std::string Daemon::Impl::publish(const Captured& c, const pipeline::PartResult&
         return "FAULT " + std::to_string(c.fault) + " (" +
                plc::to_string(static_cast<plc::ErrorCode>(c.fault)) + "): " + c.failure;
     }
-    if (auto ok = server->finish(job.trigger.trigger_id, to_plc(r)); !ok)
-        return verdict_text(r) + ", not published: " + ok.error().message;
+    if (auto ok = server->finish(job.trigger.trigger_id, to_plc(r, check)); !ok)
+        return verdict_text(r, check) + ", not published: " + ok.error().message;
     problem = r.measurement.verdict != measure::Verdict::kOk || r.degraded;
-    return verdict_text(r);
+    return verdict_text(r, check);
 }
 
 void Daemon::Impl::process(Captured c) {
@@ -666,7 +678,12 @@ void Daemon::Impl::process(Captured c) {
     prepare_results(job.setup);
     const auto master = job.setup->masters.find(job.trigger.recipe_slot);
     const bool is_master = master != job.setup->masters.end();
-    if (is_master && !c.rec.temperature_c) c.rec.temperature_c = master->second.temperature_c;
+    if (is_master && !c.rec.temperature_c) {  // a cold master: the pyrometer reads nothing
+        c.rec.temperature_c = master->second.temperature_c;
+        std::erase_if(c.degraded, [](const std::string& why) {
+            return why.rfind("part temperature unknown", 0) == 0;
+        });
+    }
     const auto t0 = Clock::now();
     pipeline::PartResult r = measure_captured(c);
     // A master's overall verdict is the verification's (docs/verification.md).
@@ -705,7 +722,8 @@ void Daemon::Impl::process(Captured c) {
 
     // Registers last: a result the PLC can acknowledge is already on disk.
     bool problem = true;
-    const std::string outcome = publish(c, r, stored, problem);
+    const std::string outcome =
+        publish(c, r, verification ? &*verification : nullptr, stored, problem);
     const std::int64_t published = core::realtime_ns();
     if (archiving) {
         if (auto where = archive->store(c.rec, job.sequence, t_result); !where)

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <ctime>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string_view>
@@ -299,10 +300,21 @@ core::Result<void> ResultsLog::append(const ResultEntry& e) {
     if (!f) return f.error();
     if (!(*f)->header.empty() && (*f)->header != header) {
         // Another recipe's features: its own file, so that every column keeps one meaning.
-        csv = config_.dir /
-              (date + "." + e.result->recipe + (e.verification ? ".verification.csv" : ".csv"));
+        // A master's check with other certified features: a file per master.
+        csv = config_.dir / (e.verification
+                                 ? date + ".verification." + e.verification->master + ".csv"
+                                 : date + "." + e.result->recipe + ".csv");
         f = file(csv);
         if (!f) return f.error();
+        if (!(*f)->header.empty() && (*f)->header != header) {
+            // Changed the same day (a recipe or certificate edited and reloaded): a file per
+            // header, named by its hash, never rows under another header's columns.
+            char tag[17];
+            std::snprintf(tag, sizeof tag, "%016zx", std::hash<std::string>{}(header));
+            csv.replace_extension(std::string(tag).substr(0, 8) + ".csv");
+            f = file(csv);
+            if (!f) return f.error();
+        }
     }
     if ((*f)->header.empty()) {
         if (auto ok = write_line(**f, csv, header); !ok) return ok;

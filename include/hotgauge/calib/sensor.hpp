@@ -2,7 +2,8 @@
 // Sensor calibration in image mode (docs/calibration.md "Sensor"): the camera of a laser-line
 // head as a pinhole with lens distortion, and the laser plane in its frame, from images of a
 // checkerboard at several poses, each taken once lit and once with only the laser line on it
-// (OpenCV calib3d: findChessboardCorners, calibrateCamera, solvePnP). A pixel of the laser line
+// (OpenCV calib3d: findChessboardCorners, cornerSubPix, calibrateCamera, whose board poses cut
+// the laser rays). A pixel of the laser line
 // triangulates to the point where its ray meets the laser plane.
 #include <Eigen/Geometry>
 #include <array>
@@ -67,6 +68,7 @@ Eigen::Vector3d triangulate(const PinholeCamera& camera, const LaserPlane& plane
 // camera's x in the plane, z away from the camera, the origin where every image column's plane
 // meets the laser plane, so that each column is a ray from it): camera frame → laser frame.
 // Any rigid choice would do (the faces' alignment absorbs it); this one makes each column a ray.
+// Needs the plane across the camera's rows (|normal.y| well above 0; fit_triangulation checks).
 Eigen::Isometry3d laser_frame(const SensorCalibration& calibration);
 
 // The calibration as the acquisition's calibrated triangulation model (acquire::CalibratedModel,
