@@ -5,6 +5,8 @@
 //                  artifact, and the accelerometer's mount and bias from gravity in it.
 //   clock          the camera → accelerometer clock offset from the artifact (spheres and
 //                  plate) scanned with the press running, after `faces`.
+//   hand-eye       a robot-moved head: the camera's pose on the flange from robot and target
+//                  poses, by each method side by side (prints; the faces come from `faces`).
 //   virtual-truth  a seeded true geometry for the virtual cell, off nominal as a real cell is.
 #include <spdlog/spdlog.h>
 
@@ -15,6 +17,7 @@
 #include "hotgauge/calib/artifact.hpp"
 #include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/calib/clock.hpp"
+#include "hotgauge/calib/hand_eye.hpp"
 #include "hotgauge/core/clock.hpp"
 #include "hotgauge/io/recording_io.hpp"
 #include "hotgauge/sim/geometry.hpp"
@@ -91,6 +94,28 @@ int run_clock(const CalibrateArgs& a) {
     return 0;
 }
 
+int run_hand_eye(const CalibrateArgs& a) {
+    auto samples = calib::read_hand_eye_poses(a.recording);
+    if (!samples) return fail(samples.error());
+    auto solutions = calib::solve_hand_eye(*samples);
+    if (!solutions) return fail(solutions.error());
+    std::printf(
+        "%zu poses; flange → camera (X) by each method, and the spread of the target's "
+        "base pose through X:\n",
+        samples->size());
+    for (const auto& s : *solutions) {
+        const Eigen::Vector3d t = s.T_flange_camera.translation();
+        const Eigen::AngleAxisd r(s.T_flange_camera.linear());
+        const Eigen::Vector3d rv = r.axis() * r.angle() * 180.0 / M_PI;
+        std::printf(
+            "%-13s t [%.4f, %.4f, %.4f] mm, rotation vector [%.5f, %.5f, %.5f]°; spread "
+            "%.5f° / %.4f mm\n",
+            s.method.c_str(), t.x(), t.y(), t.z(), rv.x(), rv.y(), rv.z(), s.rotation_rms_deg,
+            s.translation_rms_mm);
+    }
+    return 0;
+}
+
 int run_virtual_truth(const CalibrateArgs& a) {
     auto cell = sim::read_cell_config(a.cell);
     if (!cell) return fail(cell.error());
@@ -146,15 +171,20 @@ Command add_calibrate(CLI::App& app) {
     clock->add_option("--calibration", a->calibration, "the calibration from `calibrate faces`")
         ->required();
     clock->add_option("--out,-o", a->out, "calibration file to write")->required();
+    auto* hand_eye = s->add_subcommand(
+        "hand-eye", "the camera's pose on a robot flange from robot and target poses (AX = XB)");
+    hand_eye->add_option("poses", a->recording, "poses file (hotgauge-hand-eye-poses-1)")
+        ->required();
     auto* truth = s->add_subcommand(
         "virtual-truth", "a seeded true geometry for the virtual cell (issue 16 perturbations)");
     truth->add_option("--cell", a->cell, "cell config")->capture_default_str();
     truth->add_option("--seed", a->seed, "random seed")->capture_default_str();
     truth->add_option("--out,-o", a->out, "calibration file to write")->required();
-    return [a, nominal, faces, clock] {
+    return [a, nominal, faces, clock, hand_eye] {
         if (nominal->parsed()) return run_nominal(*a);
         if (faces->parsed()) return run_faces(*a);
         if (clock->parsed()) return run_clock(*a);
+        if (hand_eye->parsed()) return run_hand_eye(*a);
         return run_virtual_truth(*a);
     };
 }

@@ -4,6 +4,8 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
 
+#include "hotgauge/io/yaml_reader.hpp"
+
 namespace hotgauge::calib {
 namespace {
 
@@ -158,6 +160,29 @@ core::Result<std::vector<HandEyeSolution>> solve_hand_eye(std::span<const HandEy
     residuals(samples, best);
     out.push_back(best);
     return out;
+}
+
+core::Result<std::vector<HandEyeSample>> read_hand_eye_poses(const std::filesystem::path& file) {
+    const io::YamlReader y(file.string());
+    return y.guarded<std::vector<HandEyeSample>>([&] {
+        const YAML::Node root = y.load();
+        y.expect_map(root, "poses file", {"format", "poses"});
+        const std::string format = y.string(y.require(root, "poses file", "format"), "format");
+        if (format != "hotgauge-hand-eye-poses-1")
+            y.fail(root["format"], "format: '" + format + "', expected hotgauge-hand-eye-poses-1");
+        const YAML::Node poses = y.require(root, "poses file", "poses");
+        if (!poses.IsSequence()) y.fail(poses, "poses: expected a list");
+        std::vector<HandEyeSample> out;
+        for (std::size_t i = 0; i < poses.size(); ++i) {
+            const std::string w = "poses[" + std::to_string(i) + "]";
+            y.expect_map(poses[i], w, {"base_from_flange", "camera_from_target"});
+            out.push_back(
+                {y.isometry(y.require(poses[i], w, "base_from_flange"), w + ".base_from_flange"),
+                 y.isometry(y.require(poses[i], w, "camera_from_target"),
+                            w + ".camera_from_target")});
+        }
+        return out;
+    });
 }
 
 }  // namespace hotgauge::calib

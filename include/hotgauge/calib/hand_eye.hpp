@@ -4,6 +4,7 @@
 // camera sees it, the camera's pose on the flange X, solving A·X = X·B with OpenCV's
 // calibrateHandEye, by several methods side by side.
 #include <Eigen/Geometry>
+#include <filesystem>
 #include <span>
 #include <string>
 #include <vector>
@@ -30,5 +31,10 @@ struct HandEyeSolution {
 // At least 3 poses whose motions turn about at least two directions (more than 5° apart);
 // fewer is an error saying how many there are and what is missing.
 core::Result<std::vector<HandEyeSolution>> solve_hand_eye(std::span<const HandEyeSample> samples);
+
+// The poses file (docs/calibration.md "Hand-eye"): format hotgauge-hand-eye-poses-1, `poses`, a
+// list of {base_from_flange, camera_from_target}, 4×4 row-major rigid transforms in mm.
+// Errors name file:line and the key.
+core::Result<std::vector<HandEyeSample>> read_hand_eye_poses(const std::filesystem::path& file);
 
 }  // namespace hotgauge::calib
