@@ -216,6 +216,17 @@ TEST(ResultsLog, AMasterCheckIsAVerificationRow) {
     EXPECT_EQ(j["verification"]["passed"], false);
     EXPECT_EQ(j["verification"]["features"][1]["reason"],
               "deviation -0.0400 mm outside ±0.0200 mm");
+    // Another master certifying other features the same day: its own file, named safely.
+    core::MasterCertificate other = cert;
+    other.master = "M/0002";
+    other.features.pop_back();
+    auto v2 = pipeline::verify(m, other);
+    ASSERT_TRUE(v2.ok());
+    e.verification = &*v2;
+    ASSERT_TRUE(log->append(e).ok());
+    EXPECT_EQ(log->last_csv().filename().string(),
+              results::local_date(kNoon) + ".verification.M_0002.csv");
+    EXPECT_EQ(lines(log->last_csv()).size(), 2u);
 }
 
 core::Recording small_recording(const std::string& id) {

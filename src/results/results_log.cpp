@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -97,6 +98,18 @@ std::string csv_row(const ResultEntry& e) {
     }
     return row;
 }
+
+namespace {
+
+// A name as part of a file name: anything but letters, digits, '-' and '_' becomes '_' (a master
+// serial "M/1" must not name a folder).
+std::string file_safe(std::string name) {
+    for (char& c : name)
+        if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_') c = '_';
+    return name.empty() ? "_" : name;
+}
+
+}  // namespace
 
 std::string verification_csv_header(const pipeline::Verification& v) {
     std::string h = "time,sequence,master,part_id,recipe,passed";
@@ -301,9 +314,9 @@ core::Result<void> ResultsLog::append(const ResultEntry& e) {
     if (!(*f)->header.empty() && (*f)->header != header) {
         // Another recipe's features: its own file, so that every column keeps one meaning.
         // A master's check with other certified features: a file per master.
-        csv = config_.dir / (e.verification
-                                 ? date + ".verification." + e.verification->master + ".csv"
-                                 : date + "." + e.result->recipe + ".csv");
+        csv = config_.dir /
+              (e.verification ? date + ".verification." + file_safe(e.verification->master) + ".csv"
+                              : date + "." + e.result->recipe + ".csv");
         f = file(csv);
         if (!f) return f.error();
         if (!(*f)->header.empty() && (*f)->header != header) {
