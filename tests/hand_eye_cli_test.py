@@ -63,7 +63,8 @@ with tempfile.TemporaryDirectory() as tmp:
     num = r"([-\d.]+)"
     found = re.findall(rf"^(\S+)\s+t \[{num}, {num}, {num}\] mm, rotation vector "
                        rf"\[{num}, {num}, {num}\]°", r.stdout, re.M)
-    assert [m[0] for m in found] == ["Tsai", "Park", "Daniilidis", "Park+refined"], r.stdout
+    assert [m[0] for m in found] == [
+        "Tsai", "Park", "Daniilidis", "Shah", "Li", "Park+refined"], r.stdout
     for name, *v in found:
         v = np.array([float(x) for x in v])
         assert np.linalg.norm(v[:3] - X[:3, 3]) < 1e-3, (name, r.stdout)

@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
 #include <random>
 
 #include "hotgauge/calib/sensor.hpp"
@@ -29,6 +31,36 @@ std::vector<calib::TargetView> views(const sim::VirtualSensorCamera& head,
     return out;
 }
 
+struct FieldError {
+    int points = 0;
+    double rms_mm = 0.0, worst_mm = 0.0;
+};
+
+// The calibration's triangulated laser points against the true camera and plane: every 32nd pixel
+// whose ray meets the plane in the measuring range, across the field.
+FieldError field_error(const sim::VirtualSensorCamera& head, const sim::SensorConfig& sensor,
+                       const calib::SensorCalibration& cal) {
+    FieldError f;
+    double sum2 = 0.0;
+    for (int v_px = 0; v_px < head.camera.height; v_px += 32)
+        for (int u_px = 0; u_px < head.camera.width; u_px += 32) {
+            const Eigen::Vector3d truth = calib::triangulate(head.camera, head.plane, u_px, v_px);
+            const Eigen::Vector3d in_laser = head.T_laser_camera * truth;
+            if (!truth.allFinite() || in_laser.z() < sensor.min_range_mm ||
+                in_laser.z() > sensor.max_range_mm || std::abs(in_laser.x()) > 205.0)
+                continue;
+            const Eigen::Vector3d est = calib::triangulate(cal.camera, cal.plane, u_px, v_px);
+            const double e = (est - truth).norm();
+            f.worst_mm = std::max(f.worst_mm, e);
+            sum2 += e * e;
+            ++f.points;
+        }
+    f.rms_mm = std::sqrt(sum2 / std::max(f.points, 1));
+    std::printf("triangulated points: %d across the field, RMS %.2f µm, worst %.2f µm\n", f.points,
+                f.rms_mm * 1e3, f.worst_mm * 1e3);
+    return f;
+}
+
 }  // namespace
 
 TEST(SensorCalibration, RecoversTheVirtualSensorsCameraAndLaserPlane) {
@@ -47,28 +79,11 @@ TEST(SensorCalibration, RecoversTheVirtualSensorsCameraAndLaserPlane) {
         cal->reprojection_rms_px, cal->camera.fx, head.camera.fx, cal->camera.cx, head.camera.cx,
         cal->camera.distortion[0], head.camera.distortion[0], cal->plane_rms_mm, cal->laser_points);
     EXPECT_LT(cal->reprojection_rms_px, 0.1);
-    // Across the field: every 32nd pixel whose ray meets the plane in the measuring range.
-    double worst = 0.0, sum2 = 0.0;
-    int n = 0;
-    for (int v_px = 0; v_px < head.camera.height; v_px += 32)
-        for (int u_px = 0; u_px < head.camera.width; u_px += 32) {
-            const Eigen::Vector3d truth = calib::triangulate(head.camera, head.plane, u_px, v_px);
-            const Eigen::Vector3d in_laser = head.T_laser_camera * truth;
-            if (!truth.allFinite() || in_laser.z() < cell->sensor.min_range_mm ||
-                in_laser.z() > cell->sensor.max_range_mm || std::abs(in_laser.x()) > 205.0)
-                continue;
-            const Eigen::Vector3d est = calib::triangulate(cal->camera, cal->plane, u_px, v_px);
-            const double e = (est - truth).norm();
-            worst = std::max(worst, e);
-            sum2 += e * e;
-            ++n;
-        }
-    std::printf("triangulated points: %d across the field, RMS %.2f µm, worst %.2f µm\n", n,
-                std::sqrt(sum2 / n) * 1e3, worst * 1e3);
-    EXPECT_GT(n, 500);
+    const FieldError f = field_error(head, cell->sensor, *cal);
+    EXPECT_GT(f.points, 500);
     // Issue 16 asks for 5 µm; this gives 58 µm RMS, 81 µm worst (docs/calibration.md "Sensor":
     // the depth scale is noise-limited). The bound guards the figure; the target is not met.
-    EXPECT_LT(worst, 0.12);
+    EXPECT_LT(f.worst_mm, 0.12);
 
     // Fitted into the acquisition's calibrated model: the same points through it, against the
     // calibration it was fitted to (what the fit adds) and against the truth.
@@ -97,10 +112,99 @@ TEST(SensorCalibration, RecoversTheVirtualSensorsCameraAndLaserPlane) {
         "calibrated model (degree 3): fit rms z %.2f µm, x %.2f µm; through it, worst %.2f "
         "µm from the calibration, %.2f µm from the truth\n",
         fit->rms_z_mm * 1e3, fit->rms_x_mm * 1e3, fit_worst * 1e3, total_worst * 1e3);
-    // Its range law follows the calibration (z to 0.1 µm RMS); its x law, one ray per column
-    // (u − u0)·pitch·z/ref, cannot follow the lens's distortion: 128 µm RMS in x. Issue 16's
-    // "fitted into the calibrated model" needs per-column x there (docs/calibration.md).
+    // Both laws follow the calibration: z to 0.1 µm RMS, x (x/z per column, cubic in the row)
+    // through the lens's distortion; through the model every point within 2 µm of it.
     EXPECT_LT(fit->rms_z_mm, 0.001);
+    EXPECT_LT(fit->rms_x_mm, 0.001);
+    EXPECT_LT(fit_worst, 0.002);
+    // And the fan law alone (one ray per column) cannot: what the x law is for.
+    auto fan = calib::fit_triangulation(*cal, 8, 3, 0);
+    ASSERT_TRUE(fan) << fan.error().message;
+    std::printf("fan law instead: x rms %.2f µm\n", fan->rms_x_mm * 1e3);
+    EXPECT_GT(fan->rms_x_mm, 0.05);
+}
+
+// The board on a precision stage (sim::stage_poses: 40 placements × 2 carriage positions 150 mm
+// apart along the range, tilted up to 50°, the stage's reading to 1 µm).
+TEST(SensorCalibration, OnAStageTheDepthScaleIsFixedButNotThePoints) {
+    auto cell = sim::read_cell_config(kConfig + "/cell.yaml");
+    ASSERT_TRUE(cell);
+    const sim::VirtualSensorCamera head = sim::design_sensor_camera(cell->sensor);
+    const calib::Checkerboard board;
+    const sim::TargetRenderer render(head.camera);
+    std::mt19937_64 rng(7);
+    std::vector<calib::StageView> v;
+    for (const auto& s : sim::stage_poses(head, board, 40, 2, 1, 825, 975, 50))
+        v.push_back({{render.board(board, s.T_camera_board, rng),
+                      render.laser(board, s.T_camera_board, head.plane, rng)},
+                     s.placement,
+                     s.stage_mm});
+    ASSERT_EQ(v.size(), 80u);
+    auto cal = calib::calibrate_sensor_on_stage(v, board);
+    ASSERT_TRUE(cal) << cal.error().message;
+    std::printf(
+        "on a stage: reprojection %.4f px, %d placements; fx %.2f (true %.2f); laser "
+        "plane RMS %.4f mm\n",
+        cal->reprojection_rms_px, cal->placements, cal->camera.fx, head.camera.fx,
+        cal->plane_rms_mm);
+    EXPECT_LT(cal->reprojection_rms_px, 0.1);
+    EXPECT_EQ(cal->placements, 40);
+    const FieldError f = field_error(head, cell->sensor, *cal);
+    EXPECT_GT(f.points, 500);
+    // The stage fixes fx (to 0.1 px) but not what limits the points: 58 µm RMS, as without it.
+    EXPECT_LT(f.worst_mm, 0.12);
+}
+
+// What limits the image mode: where cornerSubPix puts the corners against where the true camera
+// images them, noise-free, for optics blurring an edge by σ 0.6, 1.0 and 1.5 px. The error is
+// the detector's (it shrinks as the blur grows and with no noise at all), and the triangulation
+// magnifies it: at 900 mm with a 300 mm baseline a row's error of 1 px is 0.6 mm of range.
+TEST(SensorCalibration, CornerLocalisationAgainstTheTruth) {
+    auto cell = sim::read_cell_config(kConfig + "/cell.yaml");
+    ASSERT_TRUE(cell);
+    const sim::VirtualSensorCamera head = sim::design_sensor_camera(cell->sensor);
+    const calib::Checkerboard b;
+    const auto& c = head.camera;
+    const cv::Mat K = (cv::Mat_<double>(3, 3) << c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1);
+    const cv::Mat D(1, 5, CV_64F, const_cast<double*>(c.distortion.data()));
+    double previous = 1e9;
+    for (double blur : {0.6, 1.0, 1.5}) {
+        const sim::TargetRenderer render(c, {.blur_px = blur, .noise_dn = 0.0});
+        std::mt19937_64 rng(3);
+        double sum2 = 0.0;
+        int n = 0;
+        for (const auto& T : sim::target_poses(head, b, 8, 1)) {
+            auto img = render.board(b, T, rng);
+            const cv::Mat m(img.height, img.width, CV_8UC1, img.pixels.data());
+            std::vector<cv::Point2f> found;
+            ASSERT_TRUE(cv::findChessboardCorners(
+                m, cv::Size(b.cols, b.rows), found,
+                cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE));
+            cv::cornerSubPix(
+                m, found, cv::Size(11, 11), cv::Size(-1, -1),
+                cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-4));
+            std::vector<cv::Point3d> in_camera;
+            for (int j = 0; j < b.rows; ++j)
+                for (int i = 0; i < b.cols; ++i) {
+                    const Eigen::Vector3d q =
+                        T * Eigen::Vector3d(i * b.square_mm, j * b.square_mm, 0);
+                    in_camera.emplace_back(q.x(), q.y(), q.z());
+                }
+            std::vector<cv::Point2d> truth;
+            cv::projectPoints(in_camera, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), K, D, truth);
+            // The detector may number the corners from the other end.
+            if (std::hypot(found[0].x - truth[0].x, found[0].y - truth[0].y) > 5)
+                std::reverse(found.begin(), found.end());
+            for (std::size_t k = 0; k < truth.size(); ++k, ++n)
+                sum2 += std::pow(found[k].x - truth[k].x, 2) + std::pow(found[k].y - truth[k].y, 2);
+        }
+        const double rms = std::sqrt(sum2 / n);
+        std::printf("blur σ %.1f px, no noise: corners %.4f px RMS from the truth over %d\n", blur,
+                    rms, n);
+        EXPECT_LT(rms, previous);
+        EXPECT_GT(rms, 0.002);  // not exact even noise-free: the detector's own error
+        previous = rms;
+    }
 }
 
 TEST(SensorCalibration, RefusesWhatCannotCalibrate) {

@@ -701,6 +701,53 @@ TEST(Triangulation, CalibratedModelFromDirectBeamSamples) {
     EXPECT_LE(max_bent, 1e-3);
 }
 
+// A lens that bends each column off the fan's ray (x scaled by 1 + 0.003·t², t the normalised
+// row, 0.3 % at the field's top and bottom): the fan law cannot follow it, the per-column x law
+// (x_degree 2) can, and to_image still inverts to_camera.
+TEST(Triangulation, CalibratedModelPerColumnXLaw) {
+    const ha::Triangulation truth = make(simulator_head());
+    auto samples = plane_steps(truth);
+    const auto bend = [](double v) {
+        const double t = (v - 543.5) / 543.5;
+        return 1.0 + 0.003 * t * t;
+    };
+    for (auto& s : samples) s.x_mm *= bend(s.v_px);
+    auto fan = ha::fit_calibrated_model(samples, {});
+    ASSERT_TRUE(fan.ok()) << fan.error().message;
+    auto fit = ha::fit_calibrated_model(samples, {.x_degree = 2});
+    ASSERT_TRUE(fit.ok()) << fit.error().message;
+    auto model = ha::Triangulation::calibrated(fit->model);
+    ASSERT_TRUE(model.ok()) << model.error().message;
+    double max_x = 0;
+    for (double u = 0.0; u <= 2047.0; u += 40.93)
+        for (double v = -0.5; v <= 1087.5; v += 0.77)
+            max_x = std::max(max_x, std::abs(truth.to_camera(u, v).x_mm * bend(v) -
+                                             model->to_camera(u, v).x_mm));
+    const RoundTrip rt = round_trip(*model, 600.0, 1200.0, 7);
+    std::printf(
+        "per-column x law: fit x rms %.3g mm (fan law %.3g mm), over the field %.3g mm; "
+        "round trip %.3g px, %.3g mm\n",
+        fit->rms_x_mm, fan->rms_x_mm, max_x, rt.max_px, rt.max_mm);
+    EXPECT_GT(fan->rms_x_mm, 0.05);
+    EXPECT_LE(fit->rms_x_mm, 1e-6);
+    EXPECT_LE(max_x, 1e-6);
+    EXPECT_LE(rt.max_px, 1e-6);
+    EXPECT_LE(rt.max_mm, 1e-6);
+
+    ha::CalibratedModel bad = fit->model;
+    bad.x_coefficients.pop_back();
+    auto t = ha::Triangulation::calibrated(bad);
+    ASSERT_FALSE(t.ok());
+    EXPECT_NE(t.error().message.find("x_coefficients: 6144 expected"), std::string::npos)
+        << t.error().message;
+    bad = fit->model;
+    bad.x_coefficients[3 * 500] = bad.x_coefficients[3 * 501];  // column 500's x/z = column 501's
+    t = ha::Triangulation::calibrated(bad);
+    ASSERT_FALSE(t.ok());
+    EXPECT_NE(t.error().message.find("does not grow from column 500 to 501"), std::string::npos)
+        << t.error().message;
+}
+
 TEST(Triangulation, CalibrationErrors) {
     const ha::Triangulation truth = make(simulator_head());
     auto samples = plane_steps(truth);

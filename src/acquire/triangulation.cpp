@@ -54,6 +54,130 @@ ColumnValue calibrated_z(const CalibratedModel& m, double u, double t) {
     return {(1.0 - f) * a.z + f * b.z, (1.0 - f) * a.dz_dt + f * b.dz_dt};
 }
 
+// x/z at fractional column u, t, by the per-column law (x_degree > 0): linear between columns,
+// and beyond the outer columns' centres (to the field's half pixel) from the outer pair.
+double column_slope(const CalibratedModel& m, int c, double t) {
+    const double* s = m.x_coefficients.data() + c * (m.x_degree + 1);
+    double v = s[m.x_degree];
+    for (int j = m.x_degree - 1; j >= 0; --j) v = v * t + s[j];
+    return v;
+}
+double calibrated_slope(const CalibratedModel& m, double u, double t) {
+    if (m.x_degree == 0) return (u - m.u0_px) * m.x_pitch_mm / m.reference_range_mm;
+    if (m.width_px == 1) return column_slope(m, 0, t);
+    const int c0 = std::clamp(static_cast<int>(std::floor(u)), 0, m.width_px - 2);
+    const double f = u - c0;
+    return (1.0 - f) * column_slope(m, c0, t) + f * column_slope(m, c0 + 1, t);
+}
+
+// The column whose x/z at t is `slope` (x/z grows with the column, checked at construction),
+// NaN outside the field. Exact: the slope is linear between column centres.
+double column_for_slope(const CalibratedModel& m, double t, double slope) {
+    if (m.x_degree == 0) return m.u0_px + slope * m.reference_range_mm / m.x_pitch_mm;
+    if (m.width_px == 1) return 0.0;
+    int lo = 0, hi = m.width_px - 1;
+    const double s_lo = column_slope(m, lo, t), s_hi = column_slope(m, hi, t);
+    // Outside the column centres: extrapolated from the outer pair, to the field's half pixel.
+    if (slope <= s_lo || slope >= s_hi) {
+        const int c = slope <= s_lo ? 0 : m.width_px - 2;
+        const double a = column_slope(m, c, t), b = column_slope(m, c + 1, t);
+        return c + (slope - a) / (b - a);
+    }
+    while (hi - lo > 1) {
+        const int mid = (lo + hi) / 2;
+        (column_slope(m, mid, t) <= slope ? lo : hi) = mid;
+    }
+    const double a = column_slope(m, lo, t), b = column_slope(m, hi, t);
+    return lo + (slope - a) / (b - a);
+}
+
+// The t where column u's z is z_mm (z(u, ·) is monotonic over the field, checked at
+// construction): safeguarded Newton; NaN when the field does not reach z_mm.
+double t_for_z(const CalibratedModel& m, double u, double z_mm) {
+    // z(u, ·) is monotonic over the field (checked at construction): safeguarded Newton in t.
+    const double mid = row_mid(m.height_px);
+    double lo = -0.5 / mid - 1.0, hi = 1.0 + 0.5 / mid;
+    const double g_lo = calibrated_z(m, u, lo).z - z_mm, g_hi = calibrated_z(m, u, hi).z - z_mm;
+    if (g_lo == 0.0) return lo;
+    if (g_hi == 0.0) return hi;
+    if ((g_lo > 0.0) == (g_hi > 0.0)) return kNaN;
+    const bool rising = g_hi > 0.0;
+    double t = lo + (hi - lo) * g_lo / (g_lo - g_hi);
+    for (int iteration = 0; iteration < 100; ++iteration) {
+        const ColumnValue f = calibrated_z(m, u, t);
+        const double g = f.z - z_mm;
+        if (g == 0.0) break;
+        if ((g > 0.0) == rising)
+            hi = t;
+        else
+            lo = t;
+        double next = t - g / f.dz_dt;
+        if (!(next >= lo && next <= hi)) next = 0.5 * (lo + hi);  // Newton left the bracket
+        const bool done = std::abs(next - t) < 1e-14;
+        t = next;
+        if (done) break;
+    }
+    return t;
+}
+
+// The per-column x law: sizes, finite, and x/z growing with the column at every 4th row and the
+// field's edges (to_image's column search needs it).
+core::Result<void> check_x_law(const CalibratedModel& m) {
+    if (m.x_degree < 0 || m.x_degree > 5)
+        return core::make_error("x_degree must be in [0, 5], got " + std::to_string(m.x_degree));
+    const std::size_t need =
+        m.x_degree == 0 ? 0 : static_cast<std::size_t>(m.width_px) * (m.x_degree + 1);
+    if (m.x_coefficients.size() != need)
+        return core::make_error("x_coefficients: " + std::to_string(need) + " expected (" +
+                                std::to_string(m.width_px) + " columns × x_degree + 1), got " +
+                                std::to_string(m.x_coefficients.size()));
+    for (double c : m.x_coefficients)
+        if (!std::isfinite(c)) return core::make_error("x_coefficients must be finite");
+    const double mid = row_mid(m.height_px);
+    for (int v = 0; m.x_degree > 0 && v <= m.height_px + 3; v += 4) {
+        const double row = std::min(v - 0.5, m.height_px - 0.5), t = (row - mid) / mid;
+        for (int c = 1; c < m.width_px; ++c)
+            if (!(column_slope(m, c, t) > column_slope(m, c - 1, t)))
+                return core::make_error("x_coefficients: x/z does not grow from column " +
+                                        std::to_string(c - 1) + " to " + std::to_string(c) +
+                                        " at row " + num(row));
+    }
+    return {};
+}
+
+// Per column, x = z·(s0 + … + sm·tᵐ) by least squares on x; the RMS of x over all samples.
+core::Result<double> fit_x_law(std::span<const CalibrationSample> samples,
+                               const std::vector<std::vector<std::size_t>>& by_column, int degree,
+                               CalibratedModel& m) {
+    const double mid = row_mid(m.height_px);
+    m.x_degree = degree;
+    m.x_coefficients.assign(static_cast<std::size_t>(m.width_px) * (degree + 1), 0.0);
+    double sum_sq = 0.0;
+    for (int c = 0; c < m.width_px; ++c) {
+        const auto& idx = by_column[static_cast<std::size_t>(c)];
+        const auto n = static_cast<Eigen::Index>(idx.size());
+        Eigen::MatrixXd a(n, degree + 1);
+        Eigen::VectorXd b(n);
+        for (Eigen::Index k = 0; k < n; ++k) {
+            const CalibrationSample& s = samples[idx[static_cast<std::size_t>(k)]];
+            const double t = (s.v_px - mid) / mid;
+            double power = s.z_mm;
+            for (int j = 0; j <= degree; ++j, power *= t) a(k, j) = power;
+            b[k] = s.x_mm;
+        }
+        const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(a);
+        if (qr.rank() < degree + 1)
+            return core::make_error("column " + std::to_string(c) +
+                                    ": samples do not determine its x law (rank " +
+                                    std::to_string(qr.rank()) + ")");
+        const Eigen::VectorXd sol = qr.solve(b);
+        std::copy(sol.data(), sol.data() + degree + 1,
+                  m.x_coefficients.data() + static_cast<std::size_t>(c) * (degree + 1));
+        sum_sq += (a * sol - b).squaredNorm();
+    }
+    return std::sqrt(sum_sq / static_cast<double>(samples.size()));
+}
+
 core::Error direct_error(const std::string& what) {
     return core::make_error("direct-beam triangulation: " + what);
 }
@@ -169,6 +293,7 @@ core::Result<Triangulation> Triangulation::calibrated(CalibratedModel m) {
             previous_v = v;
         }
     }
+    if (auto ok = check_x_law(m); !ok) return fail(ok.error().message);
     const int width = m.width_px, height = m.height_px;
     return Triangulation(std::move(m), width, height);
 }
@@ -183,9 +308,9 @@ ProfilePoint Triangulation::to_camera(double u_px, double v_px) const {
         return {(u_px - p.u0_px) * p.x_pitch_mm * z / p.reference_range_mm, z};
     }
     const auto& m = std::get<CalibratedModel>(model_);
-    const double mid = row_mid(m.height_px);
-    const double z = calibrated_z(m, u_px, (v_px - mid) / mid).z;
-    return {(u_px - m.u0_px) * m.x_pitch_mm * z / m.reference_range_mm, z};
+    const double mid = row_mid(m.height_px), t = (v_px - mid) / mid;
+    const double z = calibrated_z(m, u_px, t).z;
+    return {z * calibrated_slope(m, u_px, t), z};
 }
 
 void Triangulation::to_camera(std::span<const StripePoint> profile, double column_offset_px,
@@ -238,31 +363,19 @@ ImagePoint Triangulation::to_image(double x_mm, double z_mm) const {
         return {u, v};
     }
     const auto& m = std::get<CalibratedModel>(model_);
-    const double u = m.u0_px + x_mm * m.reference_range_mm / (m.x_pitch_mm * z_mm);
-    if (!in_field(u, m.width_px)) return kNone;
-    // z(u, ·) is monotonic over the field (checked at construction): safeguarded Newton in t.
-    const double mid = row_mid(m.height_px);
-    double lo = -0.5 / mid - 1.0, hi = 1.0 + 0.5 / mid;
-    const double g_lo = calibrated_z(m, u, lo).z - z_mm, g_hi = calibrated_z(m, u, hi).z - z_mm;
-    if (g_lo == 0.0) return {u, -0.5};
-    if (g_hi == 0.0) return {u, m.height_px - 0.5};
-    if ((g_lo > 0.0) == (g_hi > 0.0)) return kNone;
-    const bool rising = g_hi > 0.0;
-    double t = lo + (hi - lo) * g_lo / (g_lo - g_hi);
-    for (int iteration = 0; iteration < 100; ++iteration) {
-        const ColumnValue f = calibrated_z(m, u, t);
-        const double g = f.z - z_mm;
-        if (g == 0.0) break;
-        if ((g > 0.0) == rising)
-            hi = t;
-        else
-            lo = t;
-        double next = t - g / f.dz_dt;
-        if (!(next >= lo && next <= hi)) next = 0.5 * (lo + hi);  // Newton left the bracket
-        const bool done = std::abs(next - t) < 1e-14;
-        t = next;
+    // u from x/z, t from z in that column; with a per-column x law each depends on the other:
+    // alternate until u settles (their coupling is the lens's distortion, small).
+    const double slope = x_mm / z_mm, mid = row_mid(m.height_px);
+    double u = column_for_slope(m, 0.0, slope), t = kNaN;
+    for (int iteration = 0; iteration < 50; ++iteration) {
+        t = t_for_z(m, std::clamp(u, -0.5, m.width_px - 0.5), z_mm);
+        if (!std::isfinite(t) || m.x_degree == 0) break;
+        const double next = column_for_slope(m, t, slope);
+        const bool done = std::abs(next - u) < 1e-10;
+        u = next;
         if (done) break;
     }
+    if (!std::isfinite(t) || !in_field(u, m.width_px)) return kNone;
     return {u, mid + t * mid};
 }
 
@@ -287,6 +400,8 @@ core::Result<CalibrationFit> fit_calibrated_model(std::span<const CalibrationSam
         return fail("degree must be in [1, 5], got " + std::to_string(options.degree));
     if (!(options.reference_range_mm > 0.0))
         return fail("reference_range_mm must be > 0, got " + num(options.reference_range_mm));
+    if (options.x_degree < 0 || options.x_degree > 5)
+        return fail("x_degree must be in [0, 5], got " + std::to_string(options.x_degree));
     const int width = options.width_px, degree = options.degree, stride = degree + 2;
     const double mid = row_mid(options.height_px);
 
@@ -381,6 +496,11 @@ core::Result<CalibrationFit> fit_calibrated_model(std::span<const CalibrationSam
     m.x_pitch_mm = fan[0] * options.reference_range_mm;
     m.u0_px = fan[1] / fan[0];
     fit.rms_x_mm = std::sqrt((ax * fan - bx).squaredNorm() / static_cast<double>(samples.size()));
+    if (options.x_degree > 0) {
+        auto rms = fit_x_law(samples, by_column, options.x_degree, m);
+        if (!rms) return fail(rms.error().message);
+        fit.rms_x_mm = *rms;
+    }
 
     auto check = Triangulation::calibrated(m);
     if (!check) return fail(check.error().message);

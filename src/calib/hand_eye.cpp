@@ -113,6 +113,63 @@ cv::Mat to_cv(const Eigen::MatrixXd& m) {
     return out;
 }
 
+Eigen::Isometry3d isometry(const cv::Mat& r, const cv::Mat& t) {
+    Eigen::Matrix3d re;
+    Eigen::Vector3d te;
+    cv::cv2eigen(r, re);
+    cv::cv2eigen(t, te);
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.linear() = re;
+    T.translation() = te;
+    return T;
+}
+
+// OpenCV's closed forms: A·X = X·B from the motions between poses (calibrateHandEye: Tsai, Park,
+// Daniilidis), then A·X = Z·B with the target's base pose Z from the poses themselves
+// (calibrateRobotWorldHandEye: Shah; Li, Wang and Wu).
+core::Result<std::vector<HandEyeSolution>> closed_forms(std::span<const HandEyeSample> samples) {
+    std::vector<cv::Mat> r_bf, t_bf, r_ct, t_ct, r_fb, t_fb;
+    for (const auto& s : samples) {
+        const Eigen::Isometry3d T_flange_base = s.T_base_flange.inverse();
+        r_bf.push_back(to_cv(s.T_base_flange.linear()));
+        t_bf.push_back(to_cv(s.T_base_flange.translation()));
+        r_ct.push_back(to_cv(s.T_camera_target.linear()));
+        t_ct.push_back(to_cv(s.T_camera_target.translation()));
+        r_fb.push_back(to_cv(T_flange_base.linear()));
+        t_fb.push_back(to_cv(T_flange_base.translation()));
+    }
+    std::vector<HandEyeSolution> out;
+    const auto add = [&](const std::string& name, const Eigen::Isometry3d& X) {
+        HandEyeSolution x{name, X};
+        residuals(samples, x);
+        out.push_back(x);
+    };
+    const std::pair<std::string, cv::HandEyeCalibrationMethod> motions[] = {
+        {"Tsai", cv::CALIB_HAND_EYE_TSAI},
+        {"Park", cv::CALIB_HAND_EYE_PARK},
+        {"Daniilidis", cv::CALIB_HAND_EYE_DANIILIDIS}};
+    const std::pair<std::string, cv::RobotWorldHandEyeCalibrationMethod> poses[] = {
+        {"Shah", cv::CALIB_ROBOT_WORLD_HAND_EYE_SHAH}, {"Li", cv::CALIB_ROBOT_WORLD_HAND_EYE_LI}};
+    std::string name;
+    try {
+        for (const auto& [n, method] : motions) {
+            name = n;
+            cv::Mat r, t;
+            cv::calibrateHandEye(r_bf, t_bf, r_ct, t_ct, r, t, method);
+            add(name, isometry(r, t));
+        }
+        for (const auto& [n, method] : poses) {
+            name = n;
+            cv::Mat r_tb, t_tb, r_cf, t_cf;
+            cv::calibrateRobotWorldHandEye(r_ct, t_ct, r_fb, t_fb, r_tb, t_tb, r_cf, t_cf, method);
+            add(name, isometry(r_cf, t_cf).inverse());
+        }
+    } catch (const cv::Exception& e) {
+        return core::make_error("hand-eye (" + name + "): " + e.what());
+    }
+    return out;
+}
+
 }  // namespace
 
 core::Result<std::vector<HandEyeSolution>> solve_hand_eye(std::span<const HandEyeSample> samples) {
@@ -124,41 +181,13 @@ core::Result<std::vector<HandEyeSolution>> solve_hand_eye(std::span<const HandEy
             "hand-eye: the robot's motions between the " + std::to_string(samples.size()) +
             " poses turn about one direction only: turn the head about two axes at least " +
             std::to_string(static_cast<int>(kMinAxisSpreadDeg)) + "° apart");
-    std::vector<cv::Mat> r_bf, t_bf, r_ct, t_ct;
-    for (const auto& s : samples) {
-        r_bf.push_back(to_cv(s.T_base_flange.linear()));
-        t_bf.push_back(to_cv(s.T_base_flange.translation()));
-        r_ct.push_back(to_cv(s.T_camera_target.linear()));
-        t_ct.push_back(to_cv(s.T_camera_target.translation()));
-    }
-    const std::pair<std::string, cv::HandEyeCalibrationMethod> methods[] = {
-        {"Tsai", cv::CALIB_HAND_EYE_TSAI},
-        {"Park", cv::CALIB_HAND_EYE_PARK},
-        {"Daniilidis", cv::CALIB_HAND_EYE_DANIILIDIS}};
-    std::vector<HandEyeSolution> out;
-    for (const auto& [name, method] : methods) {
-        cv::Mat r, t;
-        try {
-            cv::calibrateHandEye(r_bf, t_bf, r_ct, t_ct, r, t, method);
-        } catch (const cv::Exception& e) {
-            return core::make_error("hand-eye (" + name + "): " + e.what());
-        }
-        Eigen::Matrix3d re;
-        Eigen::Vector3d te;
-        cv::cv2eigen(r, re);
-        cv::cv2eigen(t, te);
-        HandEyeSolution x;
-        x.method = name;
-        x.T_flange_camera.linear() = re;
-        x.T_flange_camera.translation() = te;
-        residuals(samples, x);
-        out.push_back(x);
-    }
-    HandEyeSolution best = out[1];  // Park: the refinement's start
+    auto out = closed_forms(samples);
+    if (!out) return out.error();
+    HandEyeSolution best = (*out)[1];  // Park: the refinement's start
     best.method = "Park+refined";
     best.T_flange_camera = refine(samples, best.T_flange_camera);
     residuals(samples, best);
-    out.push_back(best);
+    out->push_back(best);
     return out;
 }
 

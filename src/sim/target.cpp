@@ -9,8 +9,7 @@
 namespace hotgauge::sim {
 namespace {
 
-constexpr int kSamples = 1;      // per pixel and axis: board edges are blurred analytically
-constexpr double kBlurPx = 0.6;  // σ of the optics' blur
+constexpr int kSamples = 1;  // per pixel and axis: board edges are blurred analytically
 constexpr double kDeg = std::numbers::pi / 180.0;
 
 }  // namespace
@@ -43,55 +42,107 @@ VirtualSensorCamera design_sensor_camera(const SensorConfig& s) {
     return h;
 }
 
+namespace {
+
+// A board centred at `centre` (camera frame) facing the camera, then tilted by up to
+// `max_tilt_deg` about a random axis in the board and spun by up to ±20°.
+Eigen::Matrix3d board_rotation(const Eigen::Vector3d& centre, double max_tilt_deg,
+                               std::mt19937_64& rng) {
+    std::uniform_real_distribution<double> u01(0.0, 1.0);
+    Eigen::Matrix3d R;
+    const Eigen::Vector3d nz = centre.normalized();  // board z away from the camera
+    const Eigen::Vector3d nx = Eigen::Vector3d::UnitX().cross(nz).cross(nz).normalized() * -1.0;
+    R << nx, nz.cross(nx), nz;
+    const double axis = 2 * std::numbers::pi * u01(rng);
+    return R *
+           Eigen::AngleAxisd(max_tilt_deg * kDeg * u01(rng),
+                             Eigen::Vector3d(std::cos(axis), std::sin(axis), 0))
+               .toRotationMatrix() *
+           Eigen::AngleAxisd(20 * kDeg * (2 * u01(rng) - 1), Eigen::Vector3d::UnitZ());
+}
+
+// Whether every corner of the board at T, with a square's margin, images 10 px inside.
+bool board_in_image(const VirtualSensorCamera& h, const calib::Checkerboard& b,
+                    const Eigen::Isometry3d& T) {
+    const calib::PinholeCamera& c = h.camera;
+    const cv::Mat K = (cv::Mat_<double>(3, 3) << c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1);
+    const cv::Mat D(1, 5, CV_64F, const_cast<double*>(c.distortion.data()));
+    std::vector<cv::Point3d> cam;
+    for (int j = -1; j <= b.rows; j += b.rows + 1)
+        for (int i = -1; i <= b.cols; i += b.cols + 1) {
+            const Eigen::Vector3d q = T * Eigen::Vector3d(i * b.square_mm, j * b.square_mm, 0);
+            if (q.z() <= 0) return false;
+            cam.emplace_back(q.x(), q.y(), q.z());
+        }
+    std::vector<cv::Point2d> px;
+    cv::projectPoints(cam, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), K, D, px);
+    return std::all_of(px.begin(), px.end(), [&](const cv::Point2d& p) {
+        return p.x > 10 && p.y > 10 && p.x < c.width - 10 && p.y < c.height - 10;
+    });
+}
+
+Eigen::Vector3d board_half(const calib::Checkerboard& b) {
+    return {(b.cols - 1) * b.square_mm / 2, (b.rows - 1) * b.square_mm / 2, 0};
+}
+
+}  // namespace
+
 std::vector<Eigen::Isometry3d> target_poses(const VirtualSensorCamera& h,
                                             const calib::Checkerboard& b, int n,
                                             std::uint64_t seed) {
     std::mt19937_64 rng(seed);
     std::uniform_real_distribution<double> u01(0.0, 1.0);
-    const calib::PinholeCamera& c = h.camera;
-    const cv::Mat K = (cv::Mat_<double>(3, 3) << c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1);
-    const cv::Mat D(1, 5, CV_64F, const_cast<double*>(c.distortion.data()));
     std::vector<Eigen::Isometry3d> poses;
-    const Eigen::Vector3d half((b.cols - 1) * b.square_mm / 2, (b.rows - 1) * b.square_mm / 2, 0);
     for (int tries = 0; static_cast<int>(poses.size()) < n && tries < 100 * n; ++tries) {
         // Centre on the laser plane, laser frame: x ±110 mm, range 680–1120 mm.
         const Eigen::Vector3d centre_laser(220.0 * (u01(rng) - 0.5), 0.0, 680.0 + 440.0 * u01(rng));
         const Eigen::Vector3d centre = h.T_laser_camera.inverse() * centre_laser;
-        // Facing the camera, then tilted up to 55° about a random axis in the board, and spun.
-        Eigen::Matrix3d R;
-        const Eigen::Vector3d nz = centre.normalized();  // board z away from the camera
-        const Eigen::Vector3d nx = Eigen::Vector3d::UnitX().cross(nz).cross(nz).normalized() * -1.0;
-        R << nx, nz.cross(nx), nz;
-        const double axis = 2 * std::numbers::pi * u01(rng);
-        R = R *
-            Eigen::AngleAxisd(55 * kDeg * u01(rng),
-                              Eigen::Vector3d(std::cos(axis), std::sin(axis), 0))
-                .toRotationMatrix() *
-            Eigen::AngleAxisd(20 * kDeg * (2 * u01(rng) - 1), Eigen::Vector3d::UnitZ());
         Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-        T.linear() = R;
-        T.translation() = centre - R * half;
-        // Every corner, with a square's margin, in the image.
-        std::vector<cv::Point3d> obj;
-        for (int j = -1; j <= b.rows; j += b.rows + 1)
-            for (int i = -1; i <= b.cols; i += b.cols + 1)
-                obj.emplace_back(i * b.square_mm, j * b.square_mm, 0);
-        std::vector<cv::Point3d> cam;
-        for (const auto& p : obj) {
-            const Eigen::Vector3d q = T * Eigen::Vector3d(p.x, p.y, p.z);
-            cam.emplace_back(q.x(), q.y(), q.z());
-        }
-        std::vector<cv::Point2d> px;
-        cv::projectPoints(cam, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), K, D, px);
-        const bool inside = std::all_of(px.begin(), px.end(), [&](const cv::Point2d& p) {
-            return p.x > 10 && p.y > 10 && p.x < c.width - 10 && p.y < c.height - 10;
-        });
-        if (inside) poses.push_back(T);
+        T.linear() = board_rotation(centre, 55.0, rng);
+        T.translation() = centre - T.linear() * board_half(b);
+        if (board_in_image(h, b, T)) poses.push_back(T);
     }
     return poses;
 }
 
-TargetRenderer::TargetRenderer(const calib::PinholeCamera& c) : camera_(c) {
+std::vector<StagePose> stage_poses(const VirtualSensorCamera& h, const calib::Checkerboard& b,
+                                   int placements, int steps, std::uint64_t seed, double kNear,
+                                   double kFar, double max_tilt_deg) {
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> u01(0.0, 1.0);
+    std::normal_distribution<double> encoder(0.0, 0.001);  // the stage's reading, mm
+    const Eigen::Isometry3d T_camera_laser = h.T_laser_camera.inverse();
+    std::vector<StagePose> out;
+    int placed = 0;
+    for (int tries = 0; placed < placements && tries < 200 * placements; ++tries) {
+        // The stage's axis: the laser's range direction, off by up to 0.5° (how it was set up).
+        const double a = 2 * std::numbers::pi * u01(rng);
+        const Eigen::Vector3d axis_laser =
+            Eigen::AngleAxisd(0.5 * kDeg * u01(rng), Eigen::Vector3d(std::cos(a), std::sin(a), 0)) *
+            Eigen::Vector3d::UnitZ();
+        const Eigen::Vector3d near_laser(220.0 * (u01(rng) - 0.5), 0.0, kNear);
+        const Eigen::Vector3d mid =
+            T_camera_laser * (near_laser + 0.5 * (kFar - kNear) * axis_laser);
+        const Eigen::Matrix3d R = board_rotation(mid, max_tilt_deg, rng);
+        std::vector<StagePose> poses;
+        for (int k = 0; k < steps; ++k) {
+            const double s = (kFar - kNear) * k / std::max(steps - 1, 1);
+            const Eigen::Vector3d centre = T_camera_laser * (near_laser + s * axis_laser);
+            Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+            T.linear() = R;
+            T.translation() = centre - R * board_half(b);
+            if (!board_in_image(h, b, T)) break;
+            poses.push_back({T, placed, s + encoder(rng)});
+        }
+        if (static_cast<int>(poses.size()) < steps) continue;
+        out.insert(out.end(), poses.begin(), poses.end());
+        ++placed;
+    }
+    return out;
+}
+
+TargetRenderer::TargetRenderer(const calib::PinholeCamera& c, RenderOptions options)
+    : camera_(c), options_(options) {
     std::vector<cv::Point2f> px;
     px.reserve(static_cast<std::size_t>(c.width) * c.height * kSamples * kSamples);
     for (int v = 0; v < c.height; ++v)
@@ -131,8 +182,8 @@ calib::GrayImage TargetRenderer::render(const Eigen::Isometry3d& T, Shade shade,
             const Eigen::Vector3d X = t * d;
             sum += t > 0 ? shade(X, T_board_camera * X) : 80.0;
         }
-        img.pixels[p] =
-            static_cast<std::uint8_t>(std::clamp(std::lround(sum / kS2 + noise(rng)), 0L, 255L));
+        img.pixels[p] = static_cast<std::uint8_t>(
+            std::clamp(std::lround(sum / kS2 + options_.noise_dn * noise(rng)), 0L, 255L));
     }
     return img;
 }
@@ -151,7 +202,7 @@ calib::GrayImage TargetRenderer::board(const calib::Checkerboard& b, const Eigen
             // The checker is w(x)·w(y), w = +1 on even squares, −1 on odd; blurred by a Gaussian
             // it is blur(w)(x)·blur(w)(y), and near an edge blur(w) is erf of the signed
             // distance: the edges (and corners) stay exactly where they are.
-            const double sigma_mm = kBlurPx * X.z() / camera_.fx;
+            const double sigma_mm = options_.blur_px * X.z() / camera_.fx;
             auto wave = [&](double c) {
                 const long k = std::lround(c / s);  // the nearest edge, k·s; square k right of it
                 const double right = k % 2 == 0 ? 1.0 : -1.0;

@@ -36,12 +36,16 @@ struct DirectBeamParams {
 // Calibrated model: per column c, z = (p0 + p1·t + … + pn·tⁿ) / (1 + q·t) with
 // t = (v − (height − 1)/2) / ((height − 1)/2), n ≤ 5; the direct-beam law is this with n = 1
 // (a polynomial alone cannot follow its pole: degree 5 leaves 75 µm over 600–1200 mm). Between
-// columns z is interpolated linearly. x from the fan as in the direct-beam model.
+// columns z is interpolated linearly. x from the fan as in the direct-beam model, or, with
+// x_degree m > 0, per column x = z·(s0 + s1·t + … + sm·tᵐ) (a lens's distortion bends a column
+// off the fan's ray), interpolated between columns alike; x/z must grow with the column.
 struct CalibratedModel {
     int width_px = 0, height_px = 0;
     int degree = 0;                    // n
     std::vector<double> coefficients;  // width_px × (n + 2): p0 … pn, q per column
     double u0_px = 0.0, x_pitch_mm = 0.0, reference_range_mm = 0.0;
+    int x_degree = 0;                    // m; 0: x from the fan
+    std::vector<double> x_coefficients;  // width_px × (m + 1): s0 … sm per column, when m > 0
 };
 
 struct ProfilePoint {
@@ -96,6 +100,7 @@ struct CalibrationOptions {
     int width_px = 2048, height_px = 1088;
     int degree = 3;                     // numerator degree n, 1..5
     double reference_range_mm = 890.0;  // where x_pitch_mm is quoted
+    int x_degree = 0;                   // 0: x from the fan; 1..5: x/z per column in t
 };
 struct CalibrationFit {
     CalibratedModel model;
@@ -104,7 +109,8 @@ struct CalibrationFit {
 };
 // Least squares per column (samples grouped by their nearest column; each column needs
 // degree + 2 samples at distinct rows), re-weighted once so that z residuals, not
-// (1 + q·t)·z residuals, are minimised; u0 and the pitch from all samples' x.
+// (1 + q·t)·z residuals, are minimised; u0 and the pitch from all samples' x, and with
+// x_degree > 0 each column's x/z law (least squares on x).
 core::Result<CalibrationFit> fit_calibrated_model(std::span<const CalibrationSample> samples,
                                                   const CalibrationOptions& options);
 

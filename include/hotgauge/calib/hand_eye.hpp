@@ -1,8 +1,8 @@
 #pragma once
 // Hand-eye calibration for a sensor head moved by a robot (paper §4.1, Eq. 10–13;
 // docs/calibration.md "Hand-eye"): from N robot poses and the poses of a fixed target as the
-// camera sees it, the camera's pose on the flange X, solving A·X = X·B with OpenCV's
-// calibrateHandEye, by several methods side by side.
+// camera sees it, the camera's pose on the flange X, solving A·X = X·B (and A·X = Z·B) with
+// OpenCV's calibrateHandEye (calibrateRobotWorldHandEye), by several methods side by side.
 #include <Eigen/Geometry>
 #include <filesystem>
 #include <span>
@@ -19,15 +19,16 @@ struct HandEyeSample {
 };
 
 struct HandEyeSolution {
-    std::string method;                 // Tsai, Park, Daniilidis, Park+refined
+    std::string method;                 // Tsai, Park, Daniilidis, Shah, Li, Park+refined
     Eigen::Isometry3d T_flange_camera;  // X
     // The target in the base frame through every pose, T_base_flange·X·T_camera_target, is one
     // fixed pose when X is right: its RMS spread about the mean, rotation (deg) and translation.
     double rotation_rms_deg = 0, translation_rms_mm = 0;
 };
 
-// OpenCV's Tsai, Park and Daniilidis side by side, then Park's refined jointly with the target's
-// base pose (Gauss–Newton on every sample's pose error), the last one the one to use.
+// OpenCV's Tsai, Park and Daniilidis (A·X = X·B, calibrateHandEye) and Shah and Li (A·X = Z·B,
+// calibrateRobotWorldHandEye) side by side, then Park's refined jointly with the target's base
+// pose (Gauss–Newton on every sample's pose error), the last one the one to use.
 // At least 3 poses whose motions turn about at least two directions (more than 5° apart);
 // fewer is an error saying how many there are and what is missing.
 core::Result<std::vector<HandEyeSolution>> solve_hand_eye(std::span<const HandEyeSample> samples);

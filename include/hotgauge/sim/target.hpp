@@ -2,8 +2,8 @@
 // The virtual sensor's camera for image-mode sensor calibration (docs/calibration.md "Sensor"):
 // a pinhole camera with lens distortion beside the laser, as a real laser-line head has, its true
 // intrinsics and laser plane, and the images of a checkerboard it takes at given poses, lit and
-// with only the laser line on it. Rendered by ray casting each pixel, the edges blurred by the
-// optics analytically (σ 0.6 px).
+// with only the laser line on it. Rendered by ray casting each pixel's centre, the edges blurred
+// by the optics analytically (σ 0.6 px by default, in the board's plane at the pixel's depth).
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <random>
@@ -31,9 +31,31 @@ std::vector<Eigen::Isometry3d> target_poses(const VirtualSensorCamera& head,
                                             const calib::Checkerboard& board, int n,
                                             std::uint64_t seed);
 
+// The board fixed on a precision linear stage (docs/calibration.md "Sensor on a stage"): its
+// pose with the carriage at `stage_mm`, as the stage's encoder reads it (1 µm noise).
+struct StagePose {
+    Eigen::Isometry3d T_camera_board = Eigen::Isometry3d::Identity();
+    int placement = 0;
+    double stage_mm = 0.0;
+};
+
+// `placements` ways of fixing the board on a stage whose axis runs along the laser's range (off
+// it by up to 0.5°), each at `steps` carriage positions taking the board's centre from 720 to
+// 1100 mm of range; the board at random places across the field, tilted up to 40°, every corner
+// in the image at every step. From `seed`.
+std::vector<StagePose> stage_poses(const VirtualSensorCamera& head,
+                                   const calib::Checkerboard& board, int placements, int steps,
+                                   std::uint64_t seed, double near_mm = 800, double far_mm = 1000,
+                                   double max_tilt_deg = 60);
+
+struct RenderOptions {
+    double blur_px = 0.6;   // σ of the optics' blur on a board square's edge facing the camera
+    double noise_dn = 1.0;  // σ of the pixels' noise, digital numbers of 255
+};
+
 class TargetRenderer {
   public:
-    explicit TargetRenderer(const calib::PinholeCamera& camera);
+    explicit TargetRenderer(const calib::PinholeCamera& camera, RenderOptions options = {});
     // The lit board at T_camera_board (board frame: corner (i, j) at (i, j)·square, z = 0).
     calib::GrayImage board(const calib::Checkerboard& b, const Eigen::Isometry3d& T_camera_board,
                            std::mt19937_64& rng) const;
@@ -46,6 +68,7 @@ class TargetRenderer {
     calib::GrayImage render(const Eigen::Isometry3d& T_camera_board, Shade shade,
                             std::mt19937_64& rng) const;
     calib::PinholeCamera camera_;
+    RenderOptions options_;
     std::vector<float> rays_;  // per pixel, per sample: undistorted (x, y) at z = 1
 };
 
