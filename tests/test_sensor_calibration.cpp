@@ -124,37 +124,6 @@ TEST(SensorCalibration, RecoversTheVirtualSensorsCameraAndLaserPlane) {
     EXPECT_GT(fan->rms_x_mm, 0.05);
 }
 
-// The board on a precision stage (sim::stage_poses: 40 placements × 2 carriage positions 150 mm
-// apart along the range, tilted up to 50°, the stage's reading to 1 µm).
-TEST(SensorCalibration, OnAStageTheDepthScaleIsFixedButNotThePoints) {
-    auto cell = sim::read_cell_config(kConfig + "/cell.yaml");
-    ASSERT_TRUE(cell);
-    const sim::VirtualSensorCamera head = sim::design_sensor_camera(cell->sensor);
-    const calib::Checkerboard board;
-    const sim::TargetRenderer render(head.camera);
-    std::mt19937_64 rng(7);
-    std::vector<calib::StageView> v;
-    for (const auto& s : sim::stage_poses(head, board, 40, 2, 1, 825, 975, 50))
-        v.push_back({{render.board(board, s.T_camera_board, rng),
-                      render.laser(board, s.T_camera_board, head.plane, rng)},
-                     s.placement,
-                     s.stage_mm});
-    ASSERT_EQ(v.size(), 80u);
-    auto cal = calib::calibrate_sensor_on_stage(v, board);
-    ASSERT_TRUE(cal) << cal.error().message;
-    std::printf(
-        "on a stage: reprojection %.4f px, %d placements; fx %.2f (true %.2f); laser "
-        "plane RMS %.4f mm\n",
-        cal->reprojection_rms_px, cal->placements, cal->camera.fx, head.camera.fx,
-        cal->plane_rms_mm);
-    EXPECT_LT(cal->reprojection_rms_px, 0.1);
-    EXPECT_EQ(cal->placements, 40);
-    const FieldError f = field_error(head, cell->sensor, *cal);
-    EXPECT_GT(f.points, 500);
-    // The stage fixes fx (to 0.1 px) but not what limits the points: 58 µm RMS, as without it.
-    EXPECT_LT(f.worst_mm, 0.12);
-}
-
 // What limits the image mode: where cornerSubPix puts the corners against where the true camera
 // images them, noise-free, for optics blurring an edge by σ 0.6, 1.0 and 1.5 px. The error is
 // the detector's (it shrinks as the blur grows and with no noise at all), and the triangulation

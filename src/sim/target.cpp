@@ -105,42 +105,6 @@ std::vector<Eigen::Isometry3d> target_poses(const VirtualSensorCamera& h,
     return poses;
 }
 
-std::vector<StagePose> stage_poses(const VirtualSensorCamera& h, const calib::Checkerboard& b,
-                                   int placements, int steps, std::uint64_t seed, double kNear,
-                                   double kFar, double max_tilt_deg) {
-    std::mt19937_64 rng(seed);
-    std::uniform_real_distribution<double> u01(0.0, 1.0);
-    std::normal_distribution<double> encoder(0.0, 0.001);  // the stage's reading, mm
-    const Eigen::Isometry3d T_camera_laser = h.T_laser_camera.inverse();
-    std::vector<StagePose> out;
-    int placed = 0;
-    for (int tries = 0; placed < placements && tries < 200 * placements; ++tries) {
-        // The stage's axis: the laser's range direction, off by up to 0.5° (how it was set up).
-        const double a = 2 * std::numbers::pi * u01(rng);
-        const Eigen::Vector3d axis_laser =
-            Eigen::AngleAxisd(0.5 * kDeg * u01(rng), Eigen::Vector3d(std::cos(a), std::sin(a), 0)) *
-            Eigen::Vector3d::UnitZ();
-        const Eigen::Vector3d near_laser(220.0 * (u01(rng) - 0.5), 0.0, kNear);
-        const Eigen::Vector3d mid =
-            T_camera_laser * (near_laser + 0.5 * (kFar - kNear) * axis_laser);
-        const Eigen::Matrix3d R = board_rotation(mid, max_tilt_deg, rng);
-        std::vector<StagePose> poses;
-        for (int k = 0; k < steps; ++k) {
-            const double s = (kFar - kNear) * k / std::max(steps - 1, 1);
-            const Eigen::Vector3d centre = T_camera_laser * (near_laser + s * axis_laser);
-            Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-            T.linear() = R;
-            T.translation() = centre - R * board_half(b);
-            if (!board_in_image(h, b, T)) break;
-            poses.push_back({T, placed, s + encoder(rng)});
-        }
-        if (static_cast<int>(poses.size()) < steps) continue;
-        out.insert(out.end(), poses.begin(), poses.end());
-        ++placed;
-    }
-    return out;
-}
-
 TargetRenderer::TargetRenderer(const calib::PinholeCamera& c, RenderOptions options)
     : camera_(c), options_(options) {
     std::vector<cv::Point2f> px;

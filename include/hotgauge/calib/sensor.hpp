@@ -52,30 +52,12 @@ struct SensorCalibration {
     double plane_rms_mm = 0.0;         // laser points off the fitted plane
     int laser_points = 0;
     int views = 0;
-    int placements = 0;  // on a stage: how many ways the board was fixed on it (else 0)
 };
 
 // Errors name the image: "target not found in image 3", too few views (3), a laser image
 // without a line, laser lines that do not fix a plane (all on one line).
 core::Result<SensorCalibration> calibrate_sensor(const std::vector<TargetView>& views,
                                                  const Checkerboard& board);
-
-// A view of the board fixed on a precision linear stage (docs/calibration.md "Sensor on a
-// stage"): `placement` numbers the ways the board was fixed on the carriage (its pose there is
-// unknown), `stage_mm` is the carriage's position as the stage reads it.
-struct StageView {
-    TargetView view;
-    int placement = 0;
-    double stage_mm = 0.0;
-};
-
-// As calibrate_sensor, then every placement's views tied together: its board poses are one pose
-// moved by stage_mm along the stage's axis (its direction in the board frame fitted, per
-// placement), all fitted jointly with the camera by Levenberg–Marquardt on the corners'
-// reprojection. The stage's readings fix the depth scale that a planar board leaves to the
-// corners' noise. Each placement needs 2 views at different readings at least.
-core::Result<SensorCalibration> calibrate_sensor_on_stage(const std::vector<StageView>& views,
-                                                          const Checkerboard& board);
 
 // Pixel (u, v) → the camera-frame point where its ray meets the laser plane; NaN when the ray
 // is parallel to the plane or meets it behind the camera.

@@ -31,23 +31,6 @@ std::vector<Eigen::Isometry3d> target_poses(const VirtualSensorCamera& head,
                                             const calib::Checkerboard& board, int n,
                                             std::uint64_t seed);
 
-// The board fixed on a precision linear stage (docs/calibration.md "Sensor on a stage"): its
-// pose with the carriage at `stage_mm`, as the stage's encoder reads it (1 µm noise).
-struct StagePose {
-    Eigen::Isometry3d T_camera_board = Eigen::Isometry3d::Identity();
-    int placement = 0;
-    double stage_mm = 0.0;
-};
-
-// `placements` ways of fixing the board on a stage whose axis runs along the laser's range (off
-// it by up to 0.5°), each at `steps` carriage positions taking the board's centre from 720 to
-// 1100 mm of range; the board at random places across the field, tilted up to 40°, every corner
-// in the image at every step. From `seed`.
-std::vector<StagePose> stage_poses(const VirtualSensorCamera& head,
-                                   const calib::Checkerboard& board, int placements, int steps,
-                                   std::uint64_t seed, double near_mm = 800, double far_mm = 1000,
-                                   double max_tilt_deg = 60);
-
 struct RenderOptions {
     double blur_px = 0.6;   // σ of the optics' blur on a board square's edge facing the camera
     double noise_dn = 1.0;  // σ of the pixels' noise, digital numbers of 255
