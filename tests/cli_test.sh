@@ -80,7 +80,7 @@ PY
 "$bin" measure "$tmp/rec" --json --part-pose "$tmp/pose.yaml" \
   --calibration "$src/config/calibration.yaml" > "$tmp/cal.json" 2> "$tmp/cal.err" \
   || fail "measure --calibration"
-grep -q "method nominal: design geometry, not measured" "$tmp/cal.err" || fail "no nominal warning"
+grep -q "method nominal: the faces' geometry is not measured" "$tmp/cal.err" || fail "no nominal warning"
 sed 's/travel_scale: 1.0$/travel_scale: 1.002/' "$src/config/calibration.yaml" > "$tmp/scaled.yaml"
 "$bin" measure "$tmp/rec" --json --part-pose "$tmp/pose.yaml" --calibration "$tmp/scaled.yaml" \
   > "$tmp/scaled.json" 2> /dev/null || fail "measure --calibration scaled"

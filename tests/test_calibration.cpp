@@ -101,7 +101,7 @@ TEST(Calibration, BadFieldsAreRefusedByName) {
     } cases[] = {
         {"format: hotgauge-calibration-1", "format: hotgauge-calibration-9", "format:"},
         {"clock_offset_ns:", "clock_offset_ms:", "clock_offset_ms"},
-        {"model: direct_beam", "model: pinhole", "sensor.model"},
+        {"model: direct_beam", "model: fisheye", "sensor.model: 'fisheye' is not known"},
         {"min_range_mm: 600", "min_range_mm: 1300", "min_range_mm must be below"},
         {"travel_scale: ", "travel_scale: -", "faces[0].travel_scale: must be positive"},
         {"scan_direction: [0.000", "scan_direction: [2.000",
@@ -164,6 +164,59 @@ TEST(Calibration, TriangulationMatchesTheSimulatorsSensor) {
     calib::SensorModel bad = nominal.sensor;
     bad.baseline_mm = 0.0;
     EXPECT_FALSE(calib::triangulation(bad).ok());
+}
+
+// An image-mode sensor calibration (model pinhole) reads back to the same numbers and becomes the
+// calibrated triangulation: a pixel lands where its ray meets the laser plane (calib::triangulate)
+// in the laser frame; a camera of another height than the one delivering frames is refused.
+TEST(Calibration, PinholeSensorReadsBackAndTriangulates) {
+    hotgauge::test::TempDir tmp;
+    calib::Calibration c = example();
+    c.method = "sensor";
+    c.sensor.model = "pinhole";
+    calib::PinholeCamera& k = c.sensor.camera;
+    k.fx = 4318.25;
+    k.fy = 4319.5;
+    k.cx = 1027.125;
+    k.cy = 540.5;
+    k.distortion = {-0.06, 0.03, 2e-4, -1e-4, 0.0};
+    c.sensor.width = k.width;
+    c.sensor.plane.normal = Eigen::Vector3d(0, -0.9486832980505138, 0.31622776601683794);
+    c.sensor.plane.offset_mm = 300.0;
+    ASSERT_TRUE(calib::write_calibration(c, tmp.path / "c.yaml").ok());
+    auto r = calib::read_calibration(tmp.path / "c.yaml");
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    EXPECT_FALSE(r->measured());  // the faces are to be aligned again
+    EXPECT_EQ(r->sensor.model, "pinhole");
+    EXPECT_EQ(r->sensor.camera.fx, k.fx);
+    EXPECT_EQ(r->sensor.camera.cy, k.cy);
+    EXPECT_EQ(r->sensor.camera.distortion, k.distortion);
+    EXPECT_EQ(r->sensor.plane.normal, c.sensor.plane.normal);
+    EXPECT_EQ(r->sensor.plane.offset_mm, 300.0);
+    auto tri = calib::triangulation(r->sensor);
+    ASSERT_TRUE(tri.ok()) << tri.error().message;
+    calib::SensorCalibration s;
+    s.camera = k;
+    s.plane = c.sensor.plane;
+    const Eigen::Isometry3d T_laser_camera = calib::laser_frame(s);
+    for (double u : {100.0, 1024.5, 1900.0})
+        for (double v : {80.0, 544.0, 1000.0}) {
+            const Eigen::Vector3d want = T_laser_camera * calib::triangulate(k, s.plane, u, v);
+            const auto p = tri->to_camera(u, v);
+            EXPECT_NEAR(p.x_mm, want.x(), 2e-3) << u << ", " << v;
+            EXPECT_NEAR(p.z_mm, want.z(), 2e-3) << u << ", " << v;
+        }
+    auto other = calib::triangulation(r->sensor, 1024);
+    ASSERT_FALSE(other.ok());
+    EXPECT_EQ(other.error().message,
+              "sensor: the calibration's camera has 1088 rows, the camera 1024");
+    // A pinhole block with a direct-beam key is refused by name.
+    std::string text = text_of(tmp.path / "c.yaml");
+    text.replace(text.find("height:"), 7, "pitch_mm:");
+    std::ofstream(tmp.path / "bad.yaml") << text;
+    auto bad = calib::read_calibration(tmp.path / "bad.yaml");
+    ASSERT_FALSE(bad.ok());
+    EXPECT_NE(bad.error().message.find("pitch_mm"), std::string::npos) << bad.error().message;
 }
 
 // A recording takes the calibration's geometry face by face; a face the calibration lacks is an

@@ -5,6 +5,7 @@
 //                  artifact, and the accelerometer's mount and bias from gravity in it.
 //   clock          the camera → accelerometer clock offset from the artifact (spheres and
 //                  plate) scanned with the press running, after `faces`.
+//   sensor         the head's camera and laser plane from checkerboard views (image mode).
 //   hand-eye       a robot-moved head: the camera's pose on the flange from robot and target
 //                  poses, by each method side by side (prints; the faces come from `faces`).
 //   virtual-truth  a seeded true geometry for the virtual cell, off nominal as a real cell is.
@@ -18,6 +19,7 @@
 #include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/calib/clock.hpp"
 #include "hotgauge/calib/hand_eye.hpp"
+#include "hotgauge/calib/sensor.hpp"
 #include "hotgauge/core/clock.hpp"
 #include "hotgauge/io/recording_io.hpp"
 #include "hotgauge/sim/geometry.hpp"
@@ -116,6 +118,49 @@ int run_hand_eye(const CalibrateArgs& a) {
     return 0;
 }
 
+// The head's camera and laser plane from checkerboard views into the calibration in force's
+// sensor (method `sensor`: the faces are to be aligned again, in the new sensor's frame).
+int run_sensor(const CalibrateArgs& a) {
+    constexpr double kMaxReprojectionPx = 0.3;
+    auto base = calib::read_calibration(a.calibration);
+    if (!base) return fail(base.error());
+    auto views = calib::read_sensor_views(a.recording);
+    if (!views) return fail(views.error());
+    auto cal = calib::calibrate_sensor(views->views, views->board);
+    if (!cal) return fail(cal.error());
+    if (cal->reprojection_rms_px > kMaxReprojectionPx)
+        return fail(core::make_error("sensor calibration refused: reprojection RMS " +
+                                     std::to_string(cal->reprojection_rms_px) + " px exceeds " +
+                                     std::to_string(kMaxReprojectionPx) + " px; " + a.calibration +
+                                     " stays in force"));
+    auto fit = calib::fit_triangulation(*cal);
+    if (!fit) return fail(fit.error());
+    calib::Calibration c = *base;
+    c.sensor.model = "pinhole";
+    c.sensor.width = cal->camera.width;
+    c.sensor.camera = cal->camera;
+    c.sensor.plane = cal->plane;
+    c.method = "sensor";
+    c.source = a.recording;
+    c.calibrated_at = core::iso8601_utc(core::realtime_ns());
+    c.residuals = {{"sensor.reprojection_rms_px", cal->reprojection_rms_px},
+                   {"sensor.plane_rms_mm", cal->plane_rms_mm},
+                   {"sensor.views", static_cast<double>(cal->views)},
+                   {"sensor.model_z_rms_mm", fit->rms_z_mm},
+                   {"sensor.model_x_rms_mm", fit->rms_x_mm}};
+    if (auto w = calib::write_calibration(c, a.out); !w) return fail(w.error());
+    const calib::PinholeCamera& k = cal->camera;
+    std::printf(
+        "%d views: reprojection %.4f px; fx %.3f fy %.3f cx %.3f cy %.3f px, k1 %.5f k2 %.5f; "
+        "laser plane RMS %.4f mm over %d points; calibrated model z %.2f µm, x %.2f µm RMS\n"
+        "%s: sensor calibrated; align the faces again (calibrate faces), the profiles' frame "
+        "is the new sensor's\n",
+        cal->views, cal->reprojection_rms_px, k.fx, k.fy, k.cx, k.cy, k.distortion[0],
+        k.distortion[1], cal->plane_rms_mm, cal->laser_points, fit->rms_z_mm * 1e3,
+        fit->rms_x_mm * 1e3, a.out.c_str());
+    return 0;
+}
+
 int run_virtual_truth(const CalibrateArgs& a) {
     auto cell = sim::read_cell_config(a.cell);
     if (!cell) return fail(cell.error());
@@ -175,13 +220,20 @@ Command add_calibrate(CLI::App& app) {
         "hand-eye", "the camera's pose on a robot flange from robot and target poses (AX = XB)");
     hand_eye->add_option("poses", a->recording, "poses file (hotgauge-hand-eye-poses-1)")
         ->required();
+    auto* sensor = s->add_subcommand(
+        "sensor", "the head's camera and laser plane from checkerboard views (image mode)");
+    sensor->add_option("views", a->recording, "views file (hotgauge-sensor-views-1)")->required();
+    sensor->add_option("--calibration", a->calibration, "the calibration in force")
+        ->capture_default_str();
+    sensor->add_option("--out,-o", a->out, "calibration file to write")->required();
     auto* truth = s->add_subcommand(
         "virtual-truth", "a seeded true geometry for the virtual cell (issue 16 perturbations)");
     truth->add_option("--cell", a->cell, "cell config")->capture_default_str();
     truth->add_option("--seed", a->seed, "random seed")->capture_default_str();
     truth->add_option("--out,-o", a->out, "calibration file to write")->required();
-    return [a, nominal, faces, clock, hand_eye] {
+    return [a, nominal, faces, clock, hand_eye, sensor] {
         if (nominal->parsed()) return run_nominal(*a);
+        if (sensor->parsed()) return run_sensor(*a);
         if (faces->parsed()) return run_faces(*a);
         if (clock->parsed()) return run_clock(*a);
         if (hand_eye->parsed()) return run_hand_eye(*a);

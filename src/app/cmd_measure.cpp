@@ -46,7 +46,8 @@ std::optional<pipeline::PartResult> measure_job(const MeasureJob& a, core::Recor
             return std::nullopt;
         }
         if (!cal->measured())
-            spdlog::warn("{}: method nominal: design geometry, not measured", a.calibration);
+            spdlog::warn("{}: method {}: the faces' geometry is not measured", a.calibration,
+                         cal->method);
     }
     const std::string recipe_path =
         a.recipe.empty() ? std::string(HOTGAUGE_CONFIG_DIR "/parts/") + rec->recipe + ".yaml"

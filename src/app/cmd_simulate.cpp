@@ -4,15 +4,20 @@
 #include <chrono>
 #include <csignal>
 #include <ctime>
+#include <filesystem>
+#include <random>
 
 #include "commands.hpp"
 #include "hotgauge/calib/artifact.hpp"
 #include "hotgauge/calib/calibration.hpp"
+#include "hotgauge/calib/sensor.hpp"
+#include "hotgauge/core/clock.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/io/recording_io.hpp"
 #include "hotgauge/plc/pyrometer.hpp"
 #include "hotgauge/sim/geometry.hpp"
 #include "hotgauge/sim/simulator.hpp"
+#include "hotgauge/sim/target.hpp"
 #include "hotgauge/vcell/virtual_cell.hpp"
 
 namespace hotgauge::app {
@@ -40,7 +45,42 @@ struct SimulateArgs {
     double seconds = 0.0;
     bool multipart = false;
     std::string pyrometer_device;  // "" = no pyrometer
+    int sensor_views = 0;          // > 0: the head's checkerboard views instead of a part
 };
+
+// The virtual head's checkerboard views for `calibrate sensor` (docs/calibration.md "Sensor"):
+// OUT/views.yaml with its images, and OUT/sensor-truth.yaml, the cell's nominal calibration
+// with the head's true camera and laser plane as its sensor.
+int write_sensor_views(const SimulateArgs& a, const sim::CellConfig& cell) {
+    if (a.out.empty()) {
+        spdlog::error("simulate --sensor-views: --out DIR is required");
+        return 1;
+    }
+    const sim::VirtualSensorCamera head = sim::design_sensor_camera(cell.sensor);
+    calib::SensorViews views;
+    const sim::TargetRenderer render(head.camera);
+    std::mt19937_64 rng(a.opt.seed);
+    for (const auto& T : sim::target_poses(head, views.board, a.sensor_views, a.opt.seed))
+        views.views.push_back(
+            {render.board(views.board, T, rng), render.laser(views.board, T, head.plane, rng)});
+    calib::Calibration truth =
+        sim::nominal_calibration(cell, a.cell, core::iso8601_utc(core::realtime_ns()));
+    truth.method = "virtual-truth";
+    truth.sensor.model = "pinhole";
+    truth.sensor.width = head.camera.width;
+    truth.sensor.camera = head.camera;
+    truth.sensor.plane = head.plane;
+    const std::filesystem::path out(a.out);
+    auto w = calib::write_sensor_views(views, out);
+    if (w) w = calib::write_calibration(truth, out / "sensor-truth.yaml");
+    if (!w) {
+        spdlog::error("{}", w.error().message);
+        return 1;
+    }
+    std::printf("%zu views %s\ntrue sensor %s\n", views.views.size(), (out / "views.yaml").c_str(),
+                (out / "sensor-truth.yaml").c_str());
+    return 0;
+}
 
 // Serves the virtual cell until SIGINT/SIGTERM (or --seconds), then prints what it sent.
 int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cell,
@@ -130,6 +170,7 @@ int run(const SimulateArgs& a) {
         }
         *cell = std::move(*moved);
     }
+    if (a.sensor_views > 0) return write_sensor_views(a, *cell);
     sim::CellConfig c = a.quick ? sim::quick(*cell) : *cell;
     if (a.no_vibration) c.vibration.enabled = false;
     for (auto& m : c.vibration.modes) m.amplitude_mm *= a.vibration_scale;
@@ -214,6 +255,8 @@ Command add_simulate(CLI::App& app) {
     s->add_option("--recipe", a->recipe, "part recipe")->capture_default_str();
     s->add_option("--artifact", a->artifact,
                   "scan this calibration artifact (docs/calibration.md) instead of a part");
+    s->add_option("--sensor-views", a->sensor_views,
+                  "render N checkerboard views of the head for `calibrate sensor` into OUT");
     s->add_option("--true-calibration", a->true_calibration,
                   "the cell's true geometry, a calibration.yaml (default: the cell config's)");
     s->add_option("--in-force", a->in_force,

@@ -1,5 +1,6 @@
 #include "hotgauge/calib/calibration.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include "hotgauge/io/yaml_reader.hpp"
@@ -19,14 +20,44 @@ double positive(const YamlReader& y, const YAML::Node& map, const std::string& w
     return v;
 }
 
+// sensor: {model: pinhole, width, height, fx, fy, cx, cy, distortion: [k1, k2, p1, p2, k3],
+// plane_normal: [x, y, z], plane_offset_mm}: an image-mode calibration.
+SensorModel read_pinhole(const YamlReader& y, const YAML::Node& s) {
+    const std::string w = "sensor";
+    y.expect_map(s, w,
+                 {"model", "width", "height", "fx", "fy", "cx", "cy", "distortion", "plane_normal",
+                  "plane_offset_mm"});
+    SensorModel m;
+    m.model = "pinhole";
+    PinholeCamera& c = m.camera;
+    c.width = static_cast<int>(y.integer(y.require(s, w, "width"), w + ".width"));
+    c.height = static_cast<int>(y.integer(y.require(s, w, "height"), w + ".height"));
+    if (c.width < 2 || c.height < 2) y.fail(s, w + ": width and height must be >= 2");
+    m.width = c.width;
+    c.fx = positive(y, s, w, "fx");
+    c.fy = positive(y, s, w, "fy");
+    c.cx = y.number(y.require(s, w, "cx"), w + ".cx");
+    c.cy = y.number(y.require(s, w, "cy"), w + ".cy");
+    const auto d = y.numbers(y.require(s, w, "distortion"), w + ".distortion", 5);
+    std::copy(d.begin(), d.end(), c.distortion.begin());
+    const YAML::Node n = y.require(s, w, "plane_normal");
+    const auto v = y.numbers(n, w + ".plane_normal", 3);
+    m.plane.normal = Eigen::Vector3d(v[0], v[1], v[2]);
+    if (std::abs(m.plane.normal.norm() - 1.0) > 1e-6)
+        y.fail(n, w + ".plane_normal: must be a unit vector");
+    m.plane.offset_mm = positive(y, s, w, "plane_offset_mm");
+    return m;
+}
+
 SensorModel read_sensor(const YamlReader& y, const YAML::Node& s) {
     const std::string w = "sensor";
+    const std::string model = y.string(y.require(s, w, "model"), w + ".model");
+    if (model == "pinhole") return read_pinhole(y, s);
+    if (model != "direct_beam")
+        y.fail(s["model"], w + ".model: '" + model + "' is not known (direct_beam, pinhole)");
     y.expect_map(s, w,
                  {"model", "width", "pitch_mm", "standoff_mm", "min_range_mm", "max_range_mm",
                   "baseline_mm"});
-    const std::string model = y.string(y.require(s, w, "model"), w + ".model");
-    if (model != "direct_beam")
-        y.fail(s["model"], w + ".model: '" + model + "' is not known (direct_beam)");
     SensorModel m;
     m.width = static_cast<int>(y.integer(y.require(s, w, "width"), w + ".width"));
     if (m.width < 2) y.fail(s["width"], w + ".width: must be >= 2");
@@ -64,6 +95,26 @@ std::string fmt_matrix(const Eigen::MatrixXd& m) {
         out += (r ? ", " : "") + io::fmt_row(row.data(), static_cast<int>(row.size()));
     }
     return out + "]";
+}
+
+// The sensor block as one flow map.
+std::string fmt_sensor(const SensorModel& s) {
+    using io::fmt_double;
+    if (s.model == "pinhole") {
+        const PinholeCamera& c = s.camera;
+        return "{model: pinhole, width: " + std::to_string(c.width) +
+               ", height: " + std::to_string(c.height) + ", fx: " + fmt_double(c.fx) +
+               ", fy: " + fmt_double(c.fy) + ", cx: " + fmt_double(c.cx) +
+               ", cy: " + fmt_double(c.cy) +
+               ", distortion: " + io::fmt_row(c.distortion.data(), 5) +
+               ", plane_normal: " + io::fmt_row(s.plane.normal.data(), 3) +
+               ", plane_offset_mm: " + fmt_double(s.plane.offset_mm) + "}";
+    }
+    return "{model: direct_beam, width: " + std::to_string(s.width) +
+           ", pitch_mm: " + fmt_double(s.pitch_mm) + ", standoff_mm: " + fmt_double(s.standoff_mm) +
+           ", min_range_mm: " + fmt_double(s.min_range_mm) +
+           ", max_range_mm: " + fmt_double(s.max_range_mm) +
+           ", baseline_mm: " + fmt_double(s.baseline_mm) + "}";
 }
 
 }  // namespace
@@ -122,12 +173,7 @@ core::Result<void> write_calibration(const Calibration& c, const std::filesystem
         y += (first ? "" : ", ") + quote(key) + ": " + fmt_double(value);
         first = false;
     }
-    const SensorModel& s = c.sensor;
-    y += "}\nsensor: {model: direct_beam, width: " + std::to_string(s.width) +
-         ", pitch_mm: " + fmt_double(s.pitch_mm) + ", standoff_mm: " + fmt_double(s.standoff_mm) +
-         ", min_range_mm: " + fmt_double(s.min_range_mm) +
-         ", max_range_mm: " + fmt_double(s.max_range_mm) +
-         ", baseline_mm: " + fmt_double(s.baseline_mm) + "}\n";
+    y += "}\nsensor: " + fmt_sensor(c.sensor) + "\n";
     y += "clock_offset_ns: " + std::to_string(c.clock_offset_ns) +
          "\naccel_bias_mps2: " + fmt_row(c.accel_bias_mps2.data(), 3) + "\nfaces:\n";
     for (const auto& f : c.faces)
@@ -161,6 +207,18 @@ core::Result<void> apply_geometry(const Calibration& c, const std::string& calib
 }
 
 core::Result<acquire::Triangulation> triangulation(const SensorModel& s, int height_px) {
+    if (s.model == "pinhole") {
+        if (s.camera.height != height_px)
+            return core::make_error("sensor: the calibration's camera has " +
+                                    std::to_string(s.camera.height) + " rows, the camera " +
+                                    std::to_string(height_px));
+        SensorCalibration calibration;
+        calibration.camera = s.camera;
+        calibration.plane = s.plane;
+        auto fit = fit_triangulation(calibration);
+        if (!fit) return core::make_error("sensor: " + fit.error().message);
+        return acquire::Triangulation::calibrated(fit->model);
+    }
     acquire::DirectBeamDesign d;
     d.standoff_mm = s.standoff_mm;
     d.pitch_mm = s.pitch_mm;

@@ -97,7 +97,8 @@ core::Result<Corners> find_corners(const Views& views, const Checkerboard& b) {
         std::vector<cv::Point2f> c;
         if (views[i]->board.empty() ||
             !cv::findChessboardCorners(mat(views[i]->board), pattern, c,
-                                       cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE))
+                                       cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE |
+                                           cv::CALIB_CB_FAST_CHECK))
             return core::make_error("sensor calibration: target not found in image " +
                                     std::to_string(i + 1) + " (" + std::to_string(b.cols) + " × " +
                                     std::to_string(b.rows) + " inner corners)");

@@ -12,21 +12,27 @@
 #include <vector>
 
 #include "hotgauge/acquire/triangulation.hpp"
+#include "hotgauge/calib/sensor.hpp"
 #include "hotgauge/core/recording.hpp"
 #include "hotgauge/core/result.hpp"
 
 namespace hotgauge::calib {
 
-// A line-laser head as a direct-beam design (acquire::design_direct_beam): ray i of the fan at
+// A line-laser head: `direct_beam`, its design (acquire::design_direct_beam): ray i of the fan at
 // x_i = (i − (width−1)/2)·pitch on the plane z = standoff, the imager `baseline_mm` beside the
-// laser origin along the camera's y.
+// laser origin along the camera's y; or `pinhole`, an image-mode calibration (calibrate_sensor):
+// the camera with its distortion and the laser plane, profiles in its laser_frame.
 struct SensorModel {
+    std::string model = "direct_beam";  // direct_beam | pinhole
     int width = 2048;
     double pitch_mm = 0.2;
     double standoff_mm = 890.0;
     double min_range_mm = 600.0;
     double max_range_mm = 1200.0;
     double baseline_mm = 300.0;
+    // model pinhole (width is the camera's; the direct-beam keys unused):
+    PinholeCamera camera;
+    LaserPlane plane;
 };
 
 struct FaceGeometry {
@@ -48,8 +54,9 @@ struct Calibration {
     std::int64_t clock_offset_ns = 0;  // added to camera timestamps: camera → accel clock
 
     const FaceGeometry* face(const std::string& name) const;
-    // Whether the geometry was measured (false: design values asserted, method `nominal`).
-    bool measured() const { return method != "nominal"; }
+    // Whether the faces' geometry was measured (false: design values asserted, method `nominal`,
+    // or only the sensor calibrated since, method `sensor`: its faces are to be aligned again).
+    bool measured() const { return method != "nominal" && method != "sensor"; }
 };
 
 // Reads calibration.yaml; errors name file:line and key. Every face's rotations must be proper
@@ -67,7 +74,9 @@ core::Result<void> write_calibration(const Calibration& c, const std::filesystem
 core::Result<void> apply_geometry(const Calibration& c, const std::string& calibration_file,
                                   core::Recording& recording);
 
-// The sensor model as the triangulation the acquisition uses (rows over the measuring range).
+// The sensor model as the triangulation the acquisition uses: direct_beam, rows over the measuring
+// range; pinhole, the calibration fitted into the calibrated model (fit_triangulation), whose
+// camera must be `height_px` rows high.
 core::Result<acquire::Triangulation> triangulation(const SensorModel& sensor, int height_px = 1088);
 
 }  // namespace hotgauge::calib

@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 #include <array>
 #include <cstdint>
+#include <filesystem>
 #include <vector>
 
 #include "hotgauge/acquire/triangulation.hpp"
@@ -58,6 +59,17 @@ struct SensorCalibration {
 // without a line, laser lines that do not fix a plane (all on one line).
 core::Result<SensorCalibration> calibrate_sensor(const std::vector<TargetView>& views,
                                                  const Checkerboard& board);
+
+// The views file (docs/calibration.md "Sensor"): format hotgauge-sensor-views-1, the board
+// {cols, rows, square_mm} and `views`, a list of {board: PNG, laser: PNG} (8-bit grey; laser
+// optional), paths relative to the file. Errors name file:line and the key, or the image.
+struct SensorViews {
+    Checkerboard board;
+    std::vector<TargetView> views;
+};
+core::Result<SensorViews> read_sensor_views(const std::filesystem::path& file);
+// Writes the images as DIR/viewNN-board.png, viewNN-laser.png and DIR/views.yaml.
+core::Result<void> write_sensor_views(const SensorViews& views, const std::filesystem::path& dir);
 
 // Pixel (u, v) → the camera-frame point where its ray meets the laser plane; NaN when the ray
 // is parallel to the plane or meets it behind the camera.
