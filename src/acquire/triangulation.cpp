@@ -54,14 +54,15 @@ ColumnValue calibrated_z(const CalibratedModel& m, double u, double t) {
     return {(1.0 - f) * a.z + f * b.z, (1.0 - f) * a.dz_dt + f * b.dz_dt};
 }
 
-// x/z at fractional column u, t, by the per-column law (x_degree > 0): linear between columns,
-// and beyond the outer columns' centres (to the field's half pixel) from the outer pair.
+// x/z of column c at t by its own law (x_degree > 0).
 double column_slope(const CalibratedModel& m, int c, double t) {
     const double* s = m.x_coefficients.data() + c * (m.x_degree + 1);
     double v = s[m.x_degree];
     for (int j = m.x_degree - 1; j >= 0; --j) v = v * t + s[j];
     return v;
 }
+// x/z at fractional column u, t: the fan's (x_degree 0), or the columns' laws linear between
+// columns and, beyond the outer columns' centres (to the field's half pixel), from the outer pair.
 double calibrated_slope(const CalibratedModel& m, double u, double t) {
     if (m.x_degree == 0) return (u - m.u0_px) * m.x_pitch_mm / m.reference_range_mm;
     if (m.width_px == 1) return column_slope(m, 0, t);
@@ -71,7 +72,8 @@ double calibrated_slope(const CalibratedModel& m, double u, double t) {
 }
 
 // The column whose x/z at t is `slope` (x/z grows with the column, checked at construction),
-// NaN outside the field. Exact: the slope is linear between column centres.
+// extrapolated beyond the outer columns (the caller checks the field). Exact: the slope is
+// linear between column centres.
 double column_for_slope(const CalibratedModel& m, double t, double slope) {
     if (m.x_degree == 0) return m.u0_px + slope * m.reference_range_mm / m.x_pitch_mm;
     if (m.width_px == 1) return 0.0;
@@ -94,7 +96,6 @@ double column_for_slope(const CalibratedModel& m, double t, double slope) {
 // The t where column u's z is z_mm (z(u, ·) is monotonic over the field, checked at
 // construction): safeguarded Newton; NaN when the field does not reach z_mm.
 double t_for_z(const CalibratedModel& m, double u, double z_mm) {
-    // z(u, ·) is monotonic over the field (checked at construction): safeguarded Newton in t.
     const double mid = row_mid(m.height_px);
     double lo = -0.5 / mid - 1.0, hi = 1.0 + 0.5 / mid;
     const double g_lo = calibrated_z(m, u, lo).z - z_mm, g_hi = calibrated_z(m, u, hi).z - z_mm;
