@@ -1,7 +1,6 @@
 #include "hotgauge/calib/sensor.hpp"
 
 #include <Eigen/SVD>
-#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <opencv2/calib3d.hpp>
@@ -60,23 +59,22 @@ std::vector<Eigen::Vector3d> laser_points(const PinholeCamera& cam, const GrayIm
     return out;
 }
 
-using Views = std::vector<const TargetView*>;
 using Corners = std::vector<std::vector<cv::Point2f>>;
 
-core::Result<void> check_views(const Views& views) {
+core::Result<void> check_views(const std::vector<TargetView>& views) {
     if (views.size() < 3)
         return core::make_error("sensor calibration: " + std::to_string(views.size()) +
                                 " views; at least 3 board poses are needed");
     for (std::size_t i = 0; i < views.size(); ++i) {
-        const GrayImage& g = views[i]->board;
-        const GrayImage& l = views[i]->laser;
+        const GrayImage& g = views[i].board;
+        const GrayImage& l = views[i].laser;
         const std::string n = std::to_string(i + 1);
         if (g.width <= 0 || g.height <= 0 ||
             g.pixels.size() != static_cast<std::size_t>(g.width) * g.height)
             return core::make_error("sensor calibration: image " + n + " has " +
                                     std::to_string(g.pixels.size()) + " pixels, not " +
                                     std::to_string(g.width) + " × " + std::to_string(g.height));
-        if (g.width != views[0]->board.width || g.height != views[0]->board.height)
+        if (g.width != views[0].board.width || g.height != views[0].board.height)
             return core::make_error("sensor calibration: image " + n +
                                     " is not the size of image 1");
         if (!l.empty() &&
@@ -87,7 +85,7 @@ core::Result<void> check_views(const Views& views) {
     return {};
 }
 
-core::Result<Corners> find_corners(const Views& views, const Checkerboard& b) {
+core::Result<Corners> find_corners(const std::vector<TargetView>& views, const Checkerboard& b) {
     const cv::Size pattern(b.cols, b.rows);
     auto mat = [](const GrayImage& g) {  // a view of the pixels, no copy
         return cv::Mat(g.height, g.width, CV_8UC1, const_cast<std::uint8_t*>(g.pixels.data()));
@@ -95,15 +93,15 @@ core::Result<Corners> find_corners(const Views& views, const Checkerboard& b) {
     Corners corners;
     for (std::size_t i = 0; i < views.size(); ++i) {
         std::vector<cv::Point2f> c;
-        if (views[i]->board.empty() ||
-            !cv::findChessboardCorners(mat(views[i]->board), pattern, c,
+        if (views[i].board.empty() ||
+            !cv::findChessboardCorners(mat(views[i].board), pattern, c,
                                        cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE |
                                            cv::CALIB_CB_FAST_CHECK))
             return core::make_error("sensor calibration: target not found in image " +
                                     std::to_string(i + 1) + " (" + std::to_string(b.cols) + " × " +
                                     std::to_string(b.rows) + " inner corners)");
         cv::cornerSubPix(
-            mat(views[i]->board), c, cv::Size(11, 11), cv::Size(-1, -1),
+            mat(views[i].board), c, cv::Size(11, 11), cv::Size(-1, -1),
             cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-4));
         corners.push_back(std::move(c));
     }
@@ -147,13 +145,13 @@ SensorCalibration calibrate_camera(const Corners& corners, const Checkerboard& b
 }
 
 // The laser plane (SVD) through every laser image's points on its board.
-core::Result<void> fit_laser_plane(const Views& views,
+core::Result<void> fit_laser_plane(const std::vector<TargetView>& views,
                                    const std::vector<Eigen::Isometry3d>& T_camera_board,
                                    SensorCalibration& out) {
     std::vector<Eigen::Vector3d> pts;
     for (std::size_t i = 0; i < views.size(); ++i) {
-        if (views[i]->laser.empty()) continue;
-        auto p = laser_points(out.camera, views[i]->laser, T_camera_board[i]);
+        if (views[i].laser.empty()) continue;
+        auto p = laser_points(out.camera, views[i].laser, T_camera_board[i]);
         if (p.size() < 50)
             return core::make_error("sensor calibration: no laser line in laser image " +
                                     std::to_string(i + 1));
@@ -240,16 +238,14 @@ core::Result<acquire::CalibrationFit> fit_triangulation(const SensorCalibration&
 
 core::Result<SensorCalibration> calibrate_sensor(const std::vector<TargetView>& views,
                                                  const Checkerboard& b) {
-    Views v;
-    for (const auto& view : views) v.push_back(&view);
-    if (auto ok = check_views(v); !ok) return ok.error();
-    auto corners = find_corners(v, b);
+    if (auto ok = check_views(views); !ok) return ok.error();
+    auto corners = find_corners(views, b);
     if (!corners) return corners.error();
     std::vector<Eigen::Isometry3d> T_camera_board;
     SensorCalibration out = calibrate_camera(
         *corners, b, cv::Size(views.front().board.width, views.front().board.height),
         T_camera_board);
-    if (auto ok = fit_laser_plane(v, T_camera_board, out); !ok) return ok.error();
+    if (auto ok = fit_laser_plane(views, T_camera_board, out); !ok) return ok.error();
     return out;
 }
 

@@ -85,8 +85,8 @@ core::Result<CellConfig> with_geometry(CellConfig cell, const calib::Calibration
                                        const std::string& truth_file) {
     const calib::SensorModel s = sensor_model(cell.sensor);
     const calib::SensorModel& m = truth.sensor;
-    if (s.width != m.width || s.pitch_mm != m.pitch_mm || s.standoff_mm != m.standoff_mm ||
-        s.baseline_mm != m.baseline_mm)
+    if (s.model != m.model || s.width != m.width || s.pitch_mm != m.pitch_mm ||
+        s.standoff_mm != m.standoff_mm || s.baseline_mm != m.baseline_mm)
         return core::make_error(truth_file +
                                 ": its sensor model is not the cell config's sensor (the "
                                 "simulator renders with the config's)");
