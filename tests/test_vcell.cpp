@@ -492,6 +492,26 @@ TEST(VirtualCell, PartOffsetsFollowTheDocumentedFormula) {
         EXPECT_LE(std::abs(vcell::part_options(base, n).temperature_c - 1000), 100.0);
 }
 
+// The master on the conveyor is the same physical part each time it comes, cold; the parts
+// around it keep their own seeds and temperatures (docs/virtual-cell.md "The master").
+TEST(VirtualCell, TheMasterIsTheSamePartEachTime) {
+    vcell::VirtualCellConfig c;
+    c.part.seed = 40;
+    c.part.temperature_c = 1000;
+    c.master = c.part;
+    c.master.seed = 1000;
+    c.master.temperature_c = 20;
+    c.master_parts = {4, 9};
+    for (int n = 1; n <= 12; ++n) {
+        const auto o = vcell::conveyor_options(c, n);
+        const bool master = n == 4 || n == 9;
+        EXPECT_EQ(o.seed, master ? 1000u : vcell::part_options(c.part, n).seed) << "part " << n;
+        EXPECT_DOUBLE_EQ(o.temperature_c,
+                         master ? 20.0 : vcell::part_options(c.part, n).temperature_c)
+            << "part " << n;
+    }
+}
+
 // A scripted PLC loads part 3 through the axis controller's registers 6 and 7: its truth is on
 // disk when register 7 says so, the camera's part and the pyrometer follow.
 TEST(VirtualCell, APlcLoadsAnotherPartOverModbus) {

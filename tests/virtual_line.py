@@ -18,6 +18,12 @@ it running, `hotgauge calibrate faces` and `calibrate clock` measure the geometr
 runs on that calibration; afterwards every part's archived recording is measured again with the
 nominal calibration, to show what commissioning changed.
 
+With --master-at K the cold master (docs/verification.md) comes down the conveyor after part K,
+twice: once triggered in master slot 9, whose certificate is written from the master's truth (as
+a CMM lab would certify it), and once in slot 10, whose certificate has Diameter 3 0.05 mm off.
+The first check must pass and the second fail naming Diameter 3 only, both reaching the PLC as the
+overall verdict and the results as verification rows, the part CSV untouched.
+
 Everything runs on loopback. Exit status 0 when every part was measured (and, with
 --check-mm, every feature within that distance of the truth and the results files complete;
 with --commission and --check-nominal-mm, the nominal geometry off by at least that much).
@@ -242,7 +248,8 @@ class Line:
     """The virtual cell, hotgauged and the pieces between them, in one working folder."""
 
     def __init__(self, bin_dir, workdir, address, seed=1, temperature=1050.0, config_extra="",
-                 archive_every_nth_ok=0, calibration=None, true_calibration=None):
+                 archive_every_nth_ok=0, calibration=None, true_calibration=None,
+                 master_parts=()):
         self.bin_dir, self.workdir, self.address = bin_dir, workdir, address
         self.seed, self.temperature = seed, temperature
         self.procs = []
@@ -257,10 +264,14 @@ class Line:
         self.archive_every_nth_ok = archive_every_nth_ok
         self.calibration = calibration or os.path.join(REPO, "config/calibration.yaml")
         self.true_calibration = true_calibration  # None: the cell config's geometry
+        self.master_parts = list(master_parts)  # conveyor numbers that bring the cold master
+        self.masters = {}  # slot: certificate path, written by certify_master()
 
     def start(self):
         self.start_pty()
         self.start_cell()
+        if self.master_parts:
+            self.certify_master()
         self.write_config()
         self.start_daemon()
         return self
@@ -279,7 +290,8 @@ class Line:
                 "--temperature", str(self.temperature), "--speed-mm-s", "200",
                 "--line-rate", "1000", "--accel-to", accel_to, "--axis-port", str(self.axis_port),
                 "--truth-dir", self.truth_dir, "--pyrometer-device", self.pyrometer_sim_dev] + \
-               (["--true-calibration", self.true_calibration] if self.true_calibration else [])
+               (["--true-calibration", self.true_calibration] if self.true_calibration else []) + \
+               [a for n in self.master_parts for a in ("--master-part", str(n))]
 
     def start_cell(self, accel_to=None):
         self.accel_to = accel_to or getattr(self, "accel_to", f"127.0.0.1:{self.accel_port}")
@@ -287,13 +299,33 @@ class Line:
         self.procs.append(self.cell)
         self.cell.wait_line(r"^serving virtual camera .* axis 127\.0\.0\.1:%d" % self.axis_port, 60)
 
+    def certify_master(self):
+        """The master is certified before the daemon starts, as on a real cell: the conveyor
+        brings it once, and its truth (the CMM's values, 4 decimals) becomes the certificate of
+        master slot 9; slot 10's certificate has Diameter 3 0.05 mm off (a wrong value)."""
+        conveyor = Conveyor(self.axis_port)
+        conveyor.load(self.master_parts[0])
+        conveyor.load(1)  # back to the first part, as the line starts with it
+        conveyor.close()
+        cold = self.truth(self.master_parts[0])
+        for slot, off in ((9, 0.0), (10, 0.05)):
+            path = os.path.join(self.workdir, f"master-slot{slot}.yaml")
+            with open(path, "w") as f:
+                f.write("format: hotgauge-master-1\nmaster: \"M-0001\"\nrecipe: hub-a\n"
+                        "certified_at: \"2026-11-20\"\ncertified_by: \"virtual CMM\"\n"
+                        "temperature_c: 20.0\ntolerance_mm: 0.02\nfeatures:\n")
+                for name, v in cold.items():
+                    v = round(v, 4) + (off if name == "Diameter 3" else 0.0)
+                    f.write(f"  - {{name: \"{name}\", value_mm: {v!r}, u_mm: 0.001}}\n")
+            self.masters[slot] = path
+
     def write_config(self, text=None):
         cfg = text or f"""# written by tests/virtual_line.py for the virtual cell
 calibration: {self.calibration}
 faces: [top, bottom, side1, side2]
 recipes:
   1: {REPO}/config/parts/hub-a.yaml
-camera:
+{self.master_config()}camera:
   id: {self.address}
   mode: peaks
   width: 2048
@@ -333,6 +365,13 @@ results:
         with open(self.config_path, "w") as f:
             f.write(cfg)
 
+    def master_config(self):
+        if not self.masters:
+            return ""
+        recipes = "".join(f"  {slot}: {REPO}/config/parts/hub-a.yaml\n" for slot in self.masters)
+        masters = "".join(f"  {slot}: {path}\n" for slot, path in self.masters.items())
+        return recipes + "masters:\n" + masters
+
     def start_daemon(self):
         # As under systemd: notifications to our socket, a 2 s watchdog (pings every second).
         self.notify = NotifySocket(os.path.join(self.workdir, "notify"))
@@ -355,17 +394,18 @@ results:
         return {f["name"]: f["cold_mm"] for f in t["features"]}
 
 
-def run_part(plc, conveyor, n, part_id, timeout=90):
+def run_part(plc, conveyor, n, part_id, timeout=90, slot=1):
     """One part through the line; returns what the PLC read and how long the cycle took."""
     if conveyor:
         conveyor.load(n)
     plc.to_idle()
     t0 = time.monotonic()
-    plc.trigger(part_id)
+    plc.trigger(part_id, slot=slot)
     r = plc.wait_state({DONE, FAULT}, timeout)
     out = decode(r)
     out["cycle_s"] = time.monotonic() - t0
     out["part"] = n
+    out["slot"] = slot
     plc.to_idle()
     return out
 
@@ -406,18 +446,26 @@ def table(parts, line):
     return "\n".join(rows), worst
 
 
-def check_results_files(results_dir, parts):
-    """Every part has its CSV row and JSON line, and the sequence numbers run on without gaps."""
-    csvs = sorted(f for f in os.listdir(results_dir) if f.endswith(".csv"))
-    jsonls = sorted(f for f in os.listdir(results_dir) if f.endswith(".jsonl"))
+def read_csvs(results_dir, names):
     rows = []
-    for name in csvs:
+    for name in names:
         with open(os.path.join(results_dir, name), newline="") as f:
             reader = csv.reader(f)
             header = next(reader)
             for row in reader:
                 assert len(row) == len(header), f"{name}: a row has {len(row)} of {len(header)} cells"
                 rows.append(dict(zip(header, row)))
+    return rows
+
+
+def check_results_files(results_dir, parts):
+    """Every part has its JSON line and, unless it is a master check, its part CSV row (a master
+    check has its verification row instead, checked by check_masters); the sequence numbers run
+    on without gaps."""
+    csvs = sorted(f for f in os.listdir(results_dir)
+                  if f.endswith(".csv") and ".verification" not in f)
+    jsonls = sorted(f for f in os.listdir(results_dir) if f.endswith(".jsonl"))
+    rows = read_csvs(results_dir, csvs)
     lines = []
     for name in jsonls:
         with open(os.path.join(results_dir, name)) as f:
@@ -425,17 +473,46 @@ def check_results_files(results_dir, parts):
                 assert text.endswith("\n"), f"{name}: a line without its end"
                 lines.append(json.loads(text))
     seqs = [j["sequence"] for j in lines]
-    assert len(rows) == len(lines) == len(parts), \
-        f"{len(parts)} parts, {len(rows)} CSV rows, {len(lines)} JSON lines"
+    produced = [p for p in parts if p["slot"] == 1]
+    assert len(lines) == len(parts) and len(rows) == len(produced), \
+        f"{len(parts)} parts ({len(produced)} produced), {len(rows)} CSV rows, {len(lines)} JSON lines"
     assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), f"sequence not continuous: {seqs}"
-    assert [r["sequence"] for r in rows] == [str(s) for s in seqs], "CSV and JSON sequences differ"
+    assert [r["sequence"] for r in rows] == \
+        [str(j["sequence"]) for j in lines if "verification" not in j], "CSV and JSON sequences differ"
     assert [j["part"]["part_id"] for j in lines] == [str(p["part_id"]) for p in parts], \
         "part ids in the files differ from the PLC's"
     for j in lines:
         for key in ("config_hash", "software_version", "time"):
             assert j.get(key), f"sequence {j['sequence']}: no {key}"
         assert j["part"]["stage_ms"], "no stage timings"
-    return csvs, jsonls, seqs
+    return csvs, jsonls, seqs, lines
+
+
+def check_masters(results_dir, parts, lines):
+    """The two master checks (--master-at): slot 9's true certificate passed, slot 10's with
+    Diameter 3 off failed naming it alone; the PLC's overall verdict is the check's, each has its
+    verification row and its JSON line's verification. Returns the passing check's worst
+    |deviation|, mm."""
+    masters = [p for p in parts if p["slot"] != 1]
+    assert [(p["slot"], p["state"], p["verdict"]) for p in masters] == \
+        [(9, DONE, "OK"), (10, DONE, "NOK")], [(p["slot"], p["state"], p["verdict"]) for p in masters]
+    names = sorted(f for f in os.listdir(results_dir) if ".verification" in f)
+    assert names and all(n.endswith(".verification.csv") for n in names), names
+    rows = read_csvs(results_dir, names)
+    assert [(r["part_id"], r["master"], r["passed"]) for r in rows] == \
+        [(str(masters[0]["part_id"]), "M-0001", "yes"), (str(masters[1]["part_id"]), "M-0001", "no")], rows
+    failed = sorted(k[:-len(" passed")] for k, v in rows[1].items() if k.endswith(" passed") and v == "no")
+    assert failed == ["Diameter 3"], failed
+    checks = [j["verification"] for j in lines if "verification" in j]
+    assert [c["passed"] for c in checks] == [True, False], checks
+    assert len(checks[0]["features"]) == 13, checks[0]
+    assert [f["name"] for f in checks[1]["features"] if not f["passed"]] == ["Diameter 3"], checks[1]
+    worst = max(abs(f["deviation_mm"]) for f in checks[0]["features"])
+    d3 = next(f["deviation_mm"] for f in checks[1]["features"] if f["name"] == "Diameter 3")
+    print(f"master checks: slot 9 passed (13 features, worst deviation {worst:.4f} mm), slot 10 "
+          f"failed on Diameter 3 alone (deviation {d3:+.4f} mm); PLC verdicts OK, NOK; "
+          f"{len(rows)} rows in {', '.join(names)}")
+    return worst
 
 
 def check_notifications(notify):
@@ -566,6 +643,9 @@ def main():
                     help="fail unless every feature of every part is within this of the truth")
     ap.add_argument("--commission", type=int, metavar="SEED",
                     help="perturb the virtual cell's true geometry with SEED and commission it")
+    ap.add_argument("--master-at", type=int, metavar="K",
+                    help="after part K, the cold master twice: master slots 9 (passes) and 10 "
+                         "(a certificate with Diameter 3 off: fails)")
     ap.add_argument("--check-nominal-mm", type=float,
                     help="with --commission: fail unless, with the nominal geometry, a part is not "
                          "found, a feature not measured, or one off by at least this much")
@@ -581,34 +661,43 @@ def main():
     cal = truth = None
     if a.commission is not None:
         cal, truth = commission(a.bin_dir, workdir, a.commission)
+    # (conveyor number, slot): the produced parts, and the master twice after part K.
+    runs = [(n, 1) for n in range(1, a.parts + 1)]
+    if a.master_at is not None:
+        k = a.master_at
+        runs = runs[:k] + [(k + 1, 9), (k + 2, 10)] + [(n + 2, 1) for n, _ in runs[k:]]
     line = Line(a.bin_dir, workdir, a.address, seed=a.seed, calibration=cal,
-                true_calibration=truth, archive_every_nth_ok=1 if cal else 0)
+                true_calibration=truth, archive_every_nth_ok=1 if cal else 0,
+                master_parts=[n for n, slot in runs if slot != 1])
     try:
         line.start()
         print(f"virtual line: camera {a.address}, PLC 127.0.0.1:{line.plc_port}, "
               f"work folder {workdir}", flush=True)
         plc, conveyor = Plc(line.plc_port), Conveyor(line.axis_port)
-        for n in range(1, a.parts + 1):
-            p = run_part(plc, conveyor, n, a.first_part_id + n - 1)
+        for i, (n, slot) in enumerate(runs):
+            p = run_part(plc, conveyor, n, a.first_part_id + i, slot=slot)
             parts.append(p)
-            print(f"part {n:2d} id {p['part_id']}: {VERDICTS.get(p['verdict'], p['verdict']) if p['state'] == DONE else 'FAULT %d' % p['error']}"
+            what = f"part {n:2d}" if slot == 1 else f"master (slot {slot})"
+            print(f"{what} id {p['part_id']}: {VERDICTS.get(p['verdict'], p['verdict']) if p['state'] == DONE else 'FAULT %d' % p['error']}"
                   f" at {p['temperature_c']} °C, PLC sequence {p['sequence']}, cycle {p['cycle_s']:.1f} s",
                   flush=True)
         plc.close()
         conveyor.close()
         rcs = line.stop()
-        text, worst = table(parts, line)
+        produced = [p for p in parts if p["slot"] == 1]
+        text, worst = table(produced, line)
         print("\n" + text)
-        csvs, jsonls, seqs = check_results_files(line.results_dir, parts)
+        csvs, jsonls, seqs, lines = check_results_files(line.results_dir, parts)
+        master_worst = check_masters(line.results_dir, parts, lines) if line.masters else None
         print(f"\nworst |measured - truth| over all features and parts: {worst:.4f} mm")
         if cal:
-            found, missing, total, before = measure_archived(line, parts, NOMINAL)
+            found, missing, total, before = measure_archived(line, produced, NOMINAL)
             print(f"commissioning: the archived recordings measured again with the nominal "
-                  f"geometry: part found in {found} of {len(parts)}; given the true part pose, "
+                  f"geometry: part found in {found} of {len(produced)}; given the true part pose, "
                   f"{missing} of {total} features not measured and the others off by up to "
                   f"{before:.4f} mm; commissioned: every feature within {worst:.4f} mm")
             if a.check_nominal_mm is not None:  # not found or not measured is worse than off
-                assert found < len(parts) or missing or before >= a.check_nominal_mm, \
+                assert found < len(produced) or missing or before >= a.check_nominal_mm, \
                     f"nominal geometry only {before:.4f} mm off: calibration did not matter"
         print(f"results: {', '.join(os.path.join(line.results_dir, f) for f in csvs + jsonls)} "
               f"(sequence {seqs[0]}..{seqs[-1]})")
@@ -617,7 +706,9 @@ def main():
         assert all(p["state"] == DONE for p in parts), "a part was not measured"
         if a.check_mm is not None:
             assert worst <= a.check_mm, f"worst error {worst:.4f} mm > {a.check_mm} mm"
-            assert all(p["verdict"] == "OK" for p in parts), [p["verdict"] for p in parts]
+            assert all(p["verdict"] == "OK" for p in produced), [p["verdict"] for p in produced]
+            if master_worst is not None:
+                assert master_worst <= a.check_mm, f"master deviation {master_worst:.4f} mm"
         ok = True
     finally:
         line.stop()

@@ -44,8 +44,9 @@ struct SimulateArgs {
     double line_rate_hz = 1000.0;
     double seconds = 0.0;
     bool multipart = false;
-    std::string pyrometer_device;  // "" = no pyrometer
-    int sensor_views = 0;          // > 0: the head's checkerboard views instead of a part
+    std::string pyrometer_device;      // "" = no pyrometer
+    int sensor_views = 0;              // > 0: the head's checkerboard views instead of a part
+    std::uint64_t master_seed = 1000;  // serve: the cold master's seed (--master-part)
 };
 
 // The virtual head's checkerboard views for `calibrate sensor` (docs/calibration.md "Sensor"):
@@ -88,6 +89,9 @@ int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cel
     a.vc.recipe = recipe;
     a.vc.cell = cell;
     a.vc.part = opt;
+    a.vc.master = opt;  // a cold master: one physical part, below the pyrometer's span
+    a.vc.master.seed = a.master_seed;
+    a.vc.master.temperature_c = 20.0;
     a.vc.line_period_s = 1.0 / a.line_rate_hz;
     if (!a.pyrometer_device.empty()) {
         plc::SerialConfig serial;  // 9600 8N1, slave 1: the defaults
@@ -312,6 +316,10 @@ Command add_simulate(CLI::App& app) {
         ->capture_default_str();
     s->add_option("--truth-dir", a->vc.truth_dir,
                   "serve: write each loaded part's ground truth to DIR/part-NNNN");
+    s->add_option("--master-part", a->vc.master_parts,
+                  "serve: conveyor part N is the cold master (20 °C, --master-seed); repeatable");
+    s->add_option("--master-seed", a->master_seed, "serve: the cold master's seed")
+        ->capture_default_str();
     s->add_option("--pyrometer-device", a->pyrometer_device,
                   "serve: simulate the pyrometer (Modbus RTU, 9600 8N1, slave 1) on this serial "
                   "device, e.g. one end of a socat pty pair");

@@ -31,7 +31,7 @@ struct LoadedPart {
 // Builds part n with `rng` seeded from its seed (start goes on drawing from it).
 core::Result<std::shared_ptr<const LoadedPart>> build_part(const VirtualCellConfig& c, int n,
                                                            std::mt19937_64& rng) {
-    sim::SimOptions options = part_options(c.part, n);
+    sim::SimOptions options = conveyor_options(c, n);
     rng.seed(options.seed);
     auto scene = sim::Scene::create(c.recipe, c.cell, options, rng);
     if (!scene) return scene.error();
@@ -54,6 +54,11 @@ sim::SimOptions part_options(const sim::SimOptions& base, int n) {
     o.seed = base.seed + static_cast<std::uint64_t>(k);
     o.temperature_c = base.temperature_c + static_cast<double>((k * 37 + 100) % 201 - 100);
     return o;
+}
+
+sim::SimOptions conveyor_options(const VirtualCellConfig& c, int n) {
+    if (!c.master_parts.contains(n)) return part_options(c.part, n);
+    return c.master;
 }
 
 struct VirtualCell::Impl {

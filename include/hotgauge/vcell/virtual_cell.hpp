@@ -18,6 +18,7 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 
 #include "hotgauge/acquire/stripe.hpp"
@@ -58,6 +59,11 @@ struct VirtualCellConfig {
     // Set: a pyrometer stand-in on this serial device (register 0, 0.1 °C per count) reads the
     // temperature of the part on the support.
     std::optional<plc::SerialConfig> pyrometer;
+    // Conveyor parts that are the cold master (docs/virtual-cell.md "The master"): the same
+    // physical part each time, `master.seed`'s dimensions and pose at `master.temperature_c`
+    // (20 °C: below the pyrometer's span, so it reads nothing, as on a real cell).
+    std::set<int> master_parts;
+    sim::SimOptions master;
 };
 
 // Part n (≥ 1) of the conveyor: `base` with seed + (n − 1) and temperature + d(n), where
@@ -65,6 +71,9 @@ struct VirtualCellConfig {
 // consecutive parts take each offset in −100..100 °C once (37 and 201 are coprime):
 // 0, +37, +74, −90, −53, −16, +21, +58, +95, −69, −32, +5 for parts 1..12.
 sim::SimOptions part_options(const sim::SimOptions& base, int n);
+
+// What conveyor part n is: the master when n is one of `c.master_parts`, else part_options.
+sim::SimOptions conveyor_options(const VirtualCellConfig& c, int n);
 
 struct VirtualCellStats {
     GvDeviceStats camera;
