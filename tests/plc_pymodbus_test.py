@@ -156,7 +156,7 @@ def check_order(tmp, recipe, name, wordorder):
         wait_for(lambda: (plc.inputs(0, 1)[0] - h0) % 65536 >= 3, "the heartbeat to advance")
         plc.write(5, [321])
         assert plc.inputs(10, 1)[0] == 321, "PLC heartbeat echo"
-        assert plc.inputs()[1] == IDLE and plc.inputs()[14] == 1, "IDLE, map version 1"
+        assert plc.inputs()[1] == IDLE and plc.inputs()[14] == 2, "IDLE, map version 2"
 
         # A full cycle, with a refused trigger while BUSY.
         part = 4242 + 70000  # above 65535: both words of the part id carry bits

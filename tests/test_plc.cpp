@@ -464,8 +464,14 @@ TEST(Handshake, InvalidResultIsAnInternalFault) {
     expect_rejected(r, "no overall verdict");
     r = derived_result(5, 3);
     r.features[0].verdict = Verdict::kDegraded;
+    r.features[0].value_mm.reset();
     r.overall = Verdict::kDegraded;
-    expect_rejected(r, "degraded is overall only");
+    expect_rejected(r, "degraded without a value");
+    r = derived_result(5, 3);
+    r.features[0].verdict = Verdict::kDegraded;
+    expect_rejected(r, "overall OK with a degraded feature");
+    r.overall = Verdict::kDegraded;  // map version 2: a feature may be degraded, with its value
+    EXPECT_TRUE(check_result(r));
     r = derived_result(5, kMaxFeatures);
     r.features.push_back({"extra", 1, 1.0, Verdict::kOk});
     expect_rejected(r, "too many features");
@@ -475,6 +481,11 @@ TEST(Handshake, OverallVerdictRule) {
     std::vector<FeatureValue> f = {{"a", 1, 1.0, Verdict::kOk}, {"b", 2, 2.0, Verdict::kOk}};
     EXPECT_EQ(overall_verdict(f, false), Verdict::kOk);
     EXPECT_EQ(overall_verdict(f, true), Verdict::kDegraded);
+    f[1].verdict = Verdict::kDegraded;  // a degraded feature degrades the part by itself
+    EXPECT_EQ(overall_verdict(f, false), Verdict::kDegraded);
+    f[0].verdict = Verdict::kNotMeasured;
+    EXPECT_EQ(overall_verdict(f, false), Verdict::kNotMeasured);
+    f[0].verdict = Verdict::kOk;
     f[1].verdict = Verdict::kNotMeasured;
     EXPECT_EQ(overall_verdict(f, true), Verdict::kNotMeasured);
     f[0].verdict = Verdict::kNok;

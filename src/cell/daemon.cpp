@@ -80,6 +80,8 @@ plc::Verdict to_plc(measure::Verdict v) {
             return plc::Verdict::kOk;
         case measure::Verdict::kNok:
             return plc::Verdict::kNok;
+        case measure::Verdict::kDegraded:
+            return plc::Verdict::kDegraded;
         case measure::Verdict::kNotMeasured:
             break;
     }

@@ -1,6 +1,8 @@
 #include "hotgauge/compensate/compensate.hpp"
 
+#include <Eigen/Cholesky>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <opencv2/core.hpp>
@@ -24,6 +26,11 @@ std::string fmt_s(double s) {
     std::snprintf(b, sizeof b, "%.3f s", s);
     return b;
 }
+
+// A stretch of the uniform grid with no measured sample behind it, [first, last].
+struct GridGap {
+    std::size_t first, last;
+};
 
 }  // namespace
 
@@ -72,6 +79,174 @@ std::vector<double> integrate_twice(const std::vector<double>& accel, double rat
     return std::vector<double>(yp, yp + n);
 }
 
+namespace {
+
+// Double integration of a record with gaps (filled by straight lines): what the fill got wrong
+// changes the velocity and the position across each gap, an error that the high-pass spreads
+// hundreds of milliseconds around it. Both are unknowns: the response to a constant and to a
+// ramp over each gap is added with the weights that make the displacement smallest outside the
+// gaps (a vibration has no drift), by least squares.
+std::vector<double> integrate_across_gaps(const std::vector<double>& accel, double rate_hz,
+                                          const std::vector<GridGap>& gaps,
+                                          const CompensationConfig& c) {
+    std::vector<double> u = integrate_twice(accel, rate_hz, c);
+    if (gaps.empty()) return u;
+    const std::size_t n = accel.size();
+    std::vector<std::vector<double>> basis;
+    for (const GridGap& g : gaps) {
+        std::vector<double> box(n, 0.0), ramp(n, 0.0);
+        const double mid = 0.5 * static_cast<double>(g.first + g.last);
+        for (std::size_t i = g.first; i <= g.last && i < n; ++i) {
+            box[i] = 1.0;
+            ramp[i] = static_cast<double>(i) - mid;
+        }
+        basis.push_back(integrate_twice(box, rate_hz, c));
+        basis.push_back(integrate_twice(ramp, rate_hz, c));
+    }
+    std::vector<std::uint8_t> use(n, 1);
+    const auto ramp_n = static_cast<std::size_t>(c.taper_s * rate_hz);
+    for (std::size_t i = 0; i < std::min(n, ramp_n); ++i) use[i] = use[n - 1 - i] = 0;
+    for (const GridGap& g : gaps)
+        for (std::size_t i = g.first; i <= g.last && i < n; ++i) use[i] = 0;
+    const auto m = static_cast<Eigen::Index>(basis.size());
+    Eigen::MatrixXd AtA = Eigen::MatrixXd::Zero(m, m);
+    Eigen::VectorXd Atb = Eigen::VectorXd::Zero(m);
+    for (std::size_t i = 0; i < n; ++i) {
+        if (!use[i]) continue;
+        for (Eigen::Index p = 0; p < m; ++p) {
+            Atb(p) -= basis[p][i] * u[i];
+            for (Eigen::Index q = 0; q < m; ++q) AtA(p, q) += basis[p][i] * basis[q][i];
+        }
+    }
+    const Eigen::VectorXd w = AtA.ldlt().solve(Atb);
+    for (Eigen::Index p = 0; p < m; ++p)
+        for (std::size_t i = 0; i < n; ++i) u[i] += w(p) * basis[p][i];
+    return u;
+}
+
+}  // namespace
+
+namespace {
+
+// The accelerometer samples near the scan, with what was wrong with the others.
+struct Samples {
+    std::vector<double> t;  // s after the face's first profile, on the camera's clock
+    std::vector<Eigen::Vector3d> a;
+    std::vector<double> non_finite_at, clipped_at;  // left out: their times
+    std::int64_t outside = 0;                       // more than 10 s from the scan
+};
+
+// Non-finite and clipped samples are left out (a clipped reading is the range, not the
+// acceleration): the integration bridges them as gaps.
+Samples usable_samples(const core::FaceScan& face, const CompensationConfig& c) {
+    Samples out;
+    const std::int64_t t_ref = face.profile_times_ns.front();
+    // Only samples near the scan count: a record may be longer (or carry a stray far-off
+    // timestamp); the integration window is the scan plus kWindowMarginS on each side.
+    constexpr double kWindowMarginS = 10.0;
+    const double scan_end_s = seconds_between(face.profile_times_ns.back(), t_ref);
+    for (std::int64_t j = 0; j < face.n_accel(); ++j) {
+        const double t = seconds_between(face.accel_times_ns[j], t_ref) - c.clock_offset_s;
+        if (t < -kWindowMarginS || t > scan_end_s + kWindowMarginS) {
+            ++out.outside;
+            continue;
+        }
+        const Eigen::Vector3d v = face.accel(j);
+        if (!v.allFinite())
+            out.non_finite_at.push_back(t);
+        else if (v.cwiseAbs().maxCoeff() >= c.clip_mps2)
+            out.clipped_at.push_back(t);
+        else {
+            out.t.push_back(t);
+            out.a.push_back(v);
+        }
+    }
+    return out;
+}
+
+// A time span where u cannot be trusted, and why.
+struct Trouble {
+    double t0, t1;
+    std::string cause;
+};
+
+bool any_within(const std::vector<double>& times, double t0, double t1) {
+    return std::any_of(times.begin(), times.end(), [&](double t) { return t >= t0 && t <= t1; });
+}
+
+// Intervals above gap_factor × period between usable samples, named by what left the samples
+// out; lone bad samples inside shorter intervals are spans of their own.
+std::vector<Trouble> find_trouble(const Samples& s, double period, const CompensationConfig& c) {
+    std::vector<Trouble> out;
+    for (std::size_t j = 0; j + 1 < s.t.size(); ++j) {
+        const double t0 = s.t[j], t1 = s.t[j + 1];
+        if (t1 - t0 <= c.gap_factor * period) continue;
+        out.push_back({t0, t1,
+                       any_within(s.non_finite_at, t0, t1) ? "non-finite accelerometer samples"
+                       : any_within(s.clipped_at, t0, t1)  ? "clipped accelerometer samples"
+                                                           : "accelerometer gap"});
+    }
+    auto lone = [&](const std::vector<double>& times, const char* cause) {
+        for (double t : times)
+            if (std::none_of(out.begin(), out.end(),
+                             [t](const Trouble& b) { return t >= b.t0 && t <= b.t1; }))
+                out.push_back({t, t, cause});
+    };
+    lone(s.non_finite_at, "non-finite accelerometer samples");
+    lone(s.clipped_at, "clipped accelerometer samples");
+    return out;
+}
+
+// The world-frame acceleration on a uniform grid from s.t.front(), straight lines over gaps.
+std::array<std::vector<double>, 3> to_grid(const Samples& s, const Eigen::Matrix3d& R_world_accel,
+                                           double period) {
+    const double t0 = s.t.front();
+    const auto n = static_cast<std::size_t>(std::floor((s.t.back() - t0) / period)) + 1;
+    std::array<std::vector<double>, 3> g;
+    for (auto& axis : g) axis.resize(n);
+    std::size_t j = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        const double t = t0 + static_cast<double>(i) * period;
+        while (j + 2 < s.t.size() && s.t[j + 1] < t) ++j;
+        const double f = std::clamp((t - s.t[j]) / (s.t[j + 1] - s.t[j]), 0.0, 1.0);
+        const Eigen::Vector3d v = R_world_accel * ((1.0 - f) * s.a[j] + f * s.a[j + 1]);
+        for (int k = 0; k < 3; ++k) g[k][i] = v[k];
+    }
+    return g;
+}
+
+std::string end_cause(const CompensationConfig& c) {
+    return "accelerometer record does not cover it with " + fmt_s(c.min_margin_s) + " margins";
+}
+
+// Which profiles the trouble (padded by degrade_pad_s) or the record's ends (min_margin_s)
+// reach, as runs of one cause.
+std::vector<core::UntrustedProfiles> untrusted_runs(const core::FaceScan& face,
+                                                    const std::vector<Trouble>& trouble,
+                                                    double rec_t0, double rec_t1,
+                                                    const CompensationConfig& c) {
+    const std::string ends = end_cause(c);
+    std::vector<core::UntrustedProfiles> out;
+    const std::int64_t t_ref = face.profile_times_ns.front();
+    for (std::int64_t k = 0; k < face.n_profiles(); ++k) {
+        const double t = seconds_between(face.profile_times_ns[k], t_ref);
+        const std::string* cause = nullptr;
+        for (const Trouble& b : trouble)
+            if (t >= b.t0 - c.degrade_pad_s && t <= b.t1 + c.degrade_pad_s) cause = &b.cause;
+        if (!cause && (t < rec_t0 + c.min_margin_s || t > rec_t1 - c.min_margin_s)) cause = &ends;
+        if (!cause) continue;
+        if (!out.empty() && out.back().last == k - 1 && out.back().cause == *cause) {
+            out.back().last = k;
+            out.back().t1_s = t;
+        } else {
+            out.push_back({k, k, t, t, *cause});
+        }
+    }
+    return out;
+}
+
+}  // namespace
+
 FaceCompensation compensate_face(const core::FaceScan& face, const CompensationConfig& c) {
     FaceCompensation out;
     out.face = face.name;
@@ -83,120 +258,82 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
         out.reasons.push_back(why);
         std::fill(out.profile_degraded.begin(), out.profile_degraded.end(), 1);
         out.n_degraded = np;
+        out.untrusted = {
+            {0, np - 1, 0.0,
+             seconds_between(face.profile_times_ns.back(), face.profile_times_ns.front()), why}};
     };
     if (np == 0) return out;
 
-    // Usable samples: finite; NaN samples are gaps.
-    std::vector<double> t_s;
-    std::vector<Eigen::Vector3d> a;
-    std::int64_t n_nan = 0, n_clip = 0;
-    const std::int64_t t_ref = face.profile_times_ns.front();
-    std::vector<double> clipped_at;
-    // Only samples near the scan count: a record may be longer (or carry a stray far-off
-    // timestamp); the integration window is the scan plus kWindowMarginS on each side.
-    constexpr double kWindowMarginS = 10.0;
-    const double scan_end_s = seconds_between(face.profile_times_ns.back(), t_ref);
-    std::int64_t n_outside = 0;
-    for (std::int64_t j = 0; j < face.n_accel(); ++j) {
-        const double t_raw = seconds_between(face.accel_times_ns[j], t_ref) - c.clock_offset_s;
-        if (t_raw < -kWindowMarginS || t_raw > scan_end_s + kWindowMarginS) {
-            ++n_outside;
-            continue;
-        }
-        const Eigen::Vector3d v = face.accel(j);
-        const double t = seconds_between(face.accel_times_ns[j], t_ref) - c.clock_offset_s;
-        if (!v.allFinite()) {
-            ++n_nan;
-            continue;
-        }
-        if (v.cwiseAbs().maxCoeff() >= c.clip_mps2) {
-            ++n_clip;
-            clipped_at.push_back(t);
-        }
-        t_s.push_back(t);
-        a.push_back(v);
-    }
-    if (n_outside)
-        out.reasons.push_back(std::to_string(n_outside) +
+    const Samples smp = usable_samples(face, c);
+    if (smp.outside)
+        out.reasons.push_back(std::to_string(smp.outside) +
                               " accelerometer sample(s) more than 10 s from the scan ignored");
-    if (t_s.size() < 16) {
+    if (smp.t.size() < 16) {
         degrade_all(face.n_accel() == 0 ? "no accelerometer samples"
                                         : "too few usable accelerometer samples (" +
-                                              std::to_string(t_s.size()) + ")");
+                                              std::to_string(smp.t.size()) + ")");
         return out;
     }
-    // Nominal period: the median interval. Gaps: intervals above gap_factor × nominal.
-    std::vector<double> dt(t_s.size() - 1);
-    for (std::size_t j = 0; j + 1 < t_s.size(); ++j) dt[j] = t_s[j + 1] - t_s[j];
-    std::vector<double> sorted = dt;
-    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-    const double period = sorted[sorted.size() / 2];
+    // Nominal period: the median interval.
+    std::vector<double> dt(smp.t.size() - 1);
+    for (std::size_t j = 0; j + 1 < smp.t.size(); ++j) dt[j] = smp.t[j + 1] - smp.t[j];
+    std::nth_element(dt.begin(), dt.begin() + dt.size() / 2, dt.end());
+    const double period = dt[dt.size() / 2];
     if (!(period > 0)) {
         degrade_all("accelerometer timestamps not increasing");
         return out;
     }
     out.rate_hz = 1.0 / period;
-    std::vector<std::pair<double, double>> bad;  // time spans where u is not to be trusted
-    int n_gaps = 0;
-    for (std::size_t j = 0; j < dt.size(); ++j)
-        if (dt[j] > c.gap_factor * period) {
-            bad.emplace_back(t_s[j], t_s[j + 1]);
-            ++n_gaps;
-        }
-    for (double t : clipped_at) bad.emplace_back(t, t);
+    const std::vector<Trouble> trouble = find_trouble(smp, period, c);
+    const auto n_gaps =
+        std::count_if(trouble.begin(), trouble.end(), [](const Trouble& b) { return b.t1 > b.t0; });
     if (n_gaps)
         out.reasons.push_back(std::to_string(n_gaps) + " gap(s) in the accelerometer record");
-    if (n_nan) out.reasons.push_back(std::to_string(n_nan) + " non-finite accelerometer sample(s)");
-    if (n_clip) out.reasons.push_back(std::to_string(n_clip) + " clipped accelerometer sample(s)");
+    if (!smp.non_finite_at.empty())
+        out.reasons.push_back(std::to_string(smp.non_finite_at.size()) +
+                              " non-finite accelerometer sample(s)");
+    if (!smp.clipped_at.empty())
+        out.reasons.push_back(std::to_string(smp.clipped_at.size()) +
+                              " clipped accelerometer sample(s)");
 
-    // World-frame acceleration on a uniform grid (linear interpolation over gaps).
-    const Eigen::Matrix3d R_world_accel = face.T_world_camera.linear() * face.R_camera_accel;
-    const double t0 = t_s.front(), t1 = t_s.back();
-    const auto n = static_cast<std::size_t>(std::floor((t1 - t0) / period)) + 1;
-    std::vector<double> ax(n), ay(n), az(n);
-    std::size_t j = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-        const double t = t0 + static_cast<double>(i) * period;
-        while (j + 2 < t_s.size() && t_s[j + 1] < t) ++j;
-        const double f = std::clamp((t - t_s[j]) / (t_s[j + 1] - t_s[j]), 0.0, 1.0);
-        const Eigen::Vector3d v = R_world_accel * ((1.0 - f) * a[j] + f * a[j + 1]);
-        ax[i] = v.x();
-        ay[i] = v.y();
-        az[i] = v.z();
-    }
     // Gravity and bias are constant in the world during a scan: integrate_twice removes them
     // with the mean; m → mm.
-    const std::vector<double> ux = integrate_twice(ax, out.rate_hz, c);
-    const std::vector<double> uy = integrate_twice(ay, out.rate_hz, c);
-    const std::vector<double> uz = integrate_twice(az, out.rate_hz, c);
+    const double t0 = smp.t.front(), t1 = smp.t.back();
+    const auto grid = to_grid(smp, face.T_world_camera.linear() * face.R_camera_accel, period);
+    std::vector<GridGap> grid_gaps;
+    for (const Trouble& b : trouble) {
+        const auto g0 = static_cast<std::size_t>(std::floor((b.t0 - t0) / period)) + 1;
+        const auto g1 = static_cast<std::size_t>(std::ceil((b.t1 - t0) / period)) - 1;
+        if (b.t1 > b.t0 && g1 >= g0) grid_gaps.push_back({g0, g1});
+    }
+    std::array<std::vector<double>, 3> u;
+    for (int k = 0; k < 3; ++k) u[k] = integrate_across_gaps(grid[k], out.rate_hz, grid_gaps, c);
 
-    const double margin_lo = t0 + c.min_margin_s, margin_hi = t1 - c.min_margin_s;
-    bool short_record = false;
+    const std::size_t n = u[0].size();
     double sum2 = 0.0;
     std::int64_t n_applied = 0;
     for (std::int64_t k = 0; k < np; ++k) {
-        const double t = seconds_between(face.profile_times_ns[k], t_ref);
-        bool deg = t < margin_lo || t > margin_hi;
-        short_record = short_record || deg;
-        for (const auto& [b0, b1] : bad)
-            deg = deg || (t >= b0 - c.degrade_pad_s && t <= b1 + c.degrade_pad_s);
-        out.profile_degraded[k] = deg;
-        out.n_degraded += deg;
-        if (t < t0 || t > t1) continue;  // no samples at all: leave uncompensated
+        const double t = seconds_between(face.profile_times_ns[k], face.profile_times_ns.front());
+        if (t < t0 || t > t1 || n < 2) continue;  // no samples at all: leave uncompensated
         const double pos = (t - t0) / period;
         const auto i0 = std::min<std::size_t>(static_cast<std::size_t>(pos), n - 2);
         const double f = pos - static_cast<double>(i0);
-        const Eigen::Vector3d u(ux[i0] + f * (ux[i0 + 1] - ux[i0]),
-                                uy[i0] + f * (uy[i0 + 1] - uy[i0]),
-                                uz[i0] + f * (uz[i0 + 1] - uz[i0]));
-        out.u_mm[k] = 1000.0 * u;
+        for (int a = 0; a < 3; ++a)
+            out.u_mm[k][a] = 1000.0 * (u[a][i0] + f * (u[a][i0 + 1] - u[a][i0]));
         out.peak_mm = std::max(out.peak_mm, out.u_mm[k].norm());
         sum2 += out.u_mm[k].squaredNorm();
         ++n_applied;
     }
-    if (short_record)
-        out.reasons.push_back("accelerometer record does not cover the scan with " +
-                              fmt_s(c.min_margin_s) + " margins");
+    out.untrusted = untrusted_runs(face, trouble, t0, t1, c);
+    for (const auto& run : out.untrusted) {
+        for (std::int64_t k = run.first; k <= run.last; ++k) out.profile_degraded[k] = 1;
+        out.n_degraded += run.last - run.first + 1;
+        const std::string why = "accelerometer record does not cover the scan with " +
+                                fmt_s(c.min_margin_s) + " margins";
+        if (run.cause == end_cause(c) &&
+            std::find(out.reasons.begin(), out.reasons.end(), why) == out.reasons.end())
+            out.reasons.push_back(why);
+    }
     out.applied = n_applied > 0;
     out.rms_mm = n_applied ? std::sqrt(sum2 / static_cast<double>(n_applied)) : 0.0;
     out.degraded = out.n_degraded > 0;

@@ -45,10 +45,11 @@ void coarse_edge(const Context& ctx, const core::FeatureSpec& f,
             seeds[fi].push_back(s.q);
             const std::int64_t k = s.q / fr.w, i = s.q % fr.w;
             bool edge = false;
-            for (const auto& nb : kNeighbours)
-                if (!fr.valid(k + nb[0], i + nb[1]) ||
-                    plane.distance(fr.point(k + nb[0], i + nb[1])) < -ep.thr)
-                    edge = true;
+            for (const auto& nb : kNeighbours) {
+                const std::int64_t kn = k + nb[0], in = i + nb[1];
+                if (fr.left_out(kn)) continue;  // unknown, not beyond the edge
+                if (!fr.valid(kn, in) || plane.distance(fr.point(kn, in)) < -ep.thr) edge = true;
+            }
             if (!edge && !flat_around(fr, plane, ep.thr, k, i)) {
                 const auto nrm = grid_normal(fr, k, i);
                 edge = nrm && std::abs(nrm->dot(plane.normal)) < cos_edge;

@@ -48,7 +48,7 @@ std::vector<Bracket> bracket_edges(const FaceFrame& fr, const std::vector<std::i
         const std::int64_t k = q / fr.w, i = q % fr.w;
         for (const auto& nb : kNeighbours) {
             const std::int64_t kb = k + nb[0], ib = i + nb[1];
-            if (kb < 0 || kb >= fr.n || ib < 0 || ib >= fr.w) continue;
+            if (kb < 0 || kb >= fr.n || ib < 0 || ib >= fr.w || fr.left_out(kb)) continue;
             const double sb = cross(kb, ib);
             if (std::isnan(sb)) continue;
             // Beyond the edge: no return, or a return farther from the sensor than the surface.
@@ -61,6 +61,7 @@ std::vector<Bracket> bracket_edges(const FaceFrame& fr, const std::vector<std::i
                 // A lone dropout on the surface is not an edge: the sample after it must be
                 // beyond as well.
                 const std::int64_t kc = kb + nb[0], ic = ib + nb[1];
+                if (fr.left_out(kc)) continue;  // unknown, not beyond
                 if (kc >= 0 && kc < fr.n && ic >= 0 && ic < fr.w) {
                     const double sc = cross(kc, ic);
                     if (std::isnan(sc) || !beyond(kc, ic, sc)) continue;

@@ -47,13 +47,15 @@ FeatureResult skeleton(const FeatureSpec& f) {
     return r;
 }
 
+// NOK (of a trusted value) before not measured before degraded before OK.
 Verdict overall(const std::vector<FeatureResult>& features) {
-    bool any_not = features.empty();
+    bool any_not = features.empty(), any_degraded = false;
     for (const auto& f : features) {
         if (f.verdict == Verdict::kNok) return Verdict::kNok;
         any_not = any_not || f.verdict == Verdict::kNotMeasured;
+        any_degraded = any_degraded || f.verdict == Verdict::kDegraded;
     }
-    return any_not ? Verdict::kNotMeasured : Verdict::kOk;
+    return any_not ? Verdict::kNotMeasured : any_degraded ? Verdict::kDegraded : Verdict::kOk;
 }
 
 // Every face in the part frame, within the part's bounding cylinder (hot, with room for an
@@ -61,7 +63,8 @@ Verdict overall(const std::vector<FeatureResult>& features) {
 std::map<std::string, detail::FaceFrame> prepare_faces(const detail::Context& ctx,
                                                        const core::Recording& rec,
                                                        const Eigen::Isometry3d& T_part_world,
-                                                       const FaceDisplacements& u) {
+                                                       const FaceDisplacements& u,
+                                                       const FaceUntrusted& untrusted) {
     double z_min = 0.0, z_max = 0.0;
     for (const auto& [name, z] : ctx.recipe.levels_mm) {
         z_min = std::min(z_min, z);
@@ -73,10 +76,11 @@ std::map<std::string, detail::FaceFrame> prepare_faces(const detail::Context& ct
     core::parallel_for(rec.faces.size(), ctx.c.threads, [&](std::size_t i, unsigned) {
         const auto& face = rec.faces[i];
         auto it = u.find(face.name);
-        prepared[i] = detail::make_frame(face, T_part_world, it == u.end() ? nullptr : &it->second,
-                                         ctx.solid.max_radius() * gmax + margin,
-                                         std::min(z_min, z_min * gmax) - margin,
-                                         std::max(z_max, z_max * gmax) + margin);
+        auto un = untrusted.find(face.name);
+        prepared[i] = detail::make_frame(
+            face, T_part_world, it == u.end() ? nullptr : &it->second,
+            un == untrusted.end() ? nullptr : &un->second, ctx.solid.max_radius() * gmax + margin,
+            std::min(z_min, z_min * gmax) - margin, std::max(z_max, z_max * gmax) + margin);
     });
     std::map<std::string, detail::FaceFrame> frames;
     for (std::size_t i = 0; i < rec.faces.size(); ++i)
@@ -107,8 +111,46 @@ void judge(const core::Recording& rec, const core::ThermalModel& material,
     r.u_cold_mm = std::hypot(r.u_mm / *growth, *r.cold_mm * dg_dt * temperature_u_c / *growth);
     r.deviation_mm = *r.cold_mm - r.nominal_mm;
     const bool ok = *r.deviation_mm >= r.tol_lower_mm && *r.deviation_mm <= r.tol_upper_mm;
+    if (r.degraded) {  // whatever the deviation: a value the data cannot vouch for sorts nothing
+        r.verdict = Verdict::kDegraded;
+        r.reason = "degraded: measured with untrusted profiles";
+        for (const auto& run : r.left_out) r.reason += "; " + run;
+        if (!ok) r.reason += " (deviation outside tolerance)";
+        return;
+    }
     r.verdict = ok ? Verdict::kOk : Verdict::kNok;
     if (!ok) r.reason = "deviation outside tolerance";
+}
+
+// The untrusted runs of a feature's faces, described.
+std::vector<std::string> untrusted_of(const FeatureSpec& f, const FaceUntrusted& untrusted) {
+    std::vector<std::string> out;
+    for (const auto& face : f.faces)
+        if (auto it = untrusted.find(face); it != untrusted.end())
+            for (const auto& run : it->second) out.push_back(core::describe(face, run));
+    return out;
+}
+
+// The features that could not be measured around the untrusted profiles, measured again with
+// them: degraded when that works, and otherwise not measured for the reason the full data gives.
+void measure_with_untrusted(const detail::Context& ctx, const core::Recording& rec,
+                            const Eigen::Isometry3d& T_part_world, const FaceDisplacements& u,
+                            const FaceUntrusted& untrusted, std::vector<FeatureResult>& measured) {
+    std::vector<std::size_t> retry;
+    for (std::size_t i = 0; i < measured.size(); ++i) {
+        measured[i].left_out = untrusted_of(ctx.recipe.features[i], untrusted);
+        if (!measured[i].hot_mm && !measured[i].left_out.empty()) retry.push_back(i);
+    }
+    if (retry.empty()) return;
+    const auto frames = prepare_faces(ctx, rec, T_part_world, u, {});
+    core::parallel_for(retry.size(), ctx.c.threads, [&](std::size_t j, unsigned) {
+        FeatureResult& r = measured[retry[j]];
+        FeatureResult again = skeleton(ctx.recipe.features[retry[j]]);
+        measure_one(ctx, frames, ctx.recipe.features[retry[j]], again);
+        again.left_out = std::move(r.left_out);
+        again.degraded = again.hot_mm.has_value();
+        r = std::move(again);
+    });
 }
 
 }  // namespace
@@ -117,6 +159,8 @@ const char* to_string(Verdict v) {
     switch (v) {
         case Verdict::kOk:
             return "OK";
+        case Verdict::kDegraded:
+            return "DEGRADED";
         case Verdict::kNok:
             return "NOK";
         case Verdict::kNotMeasured:
@@ -142,7 +186,7 @@ PartMeasurement unmeasured(const core::Recipe& recipe, const core::Recording& re
 
 PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& rec,
                              const Eigen::Isometry3d& T_world_part, const FaceDisplacements& u,
-                             const MeasureConfig& config) {
+                             const MeasureConfig& config, const FaceUntrusted& untrusted) {
     PartMeasurement out;
     out.temperature_c = rec.temperature_c;
     detail::Expect ex;
@@ -157,13 +201,15 @@ PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& 
         ex.slack = 0.5 * config.unknown_growth;
     }
     const detail::Context ctx{recipe, core::AxisymmetricSolid::from_recipe(recipe), ex, config};
-    const auto frames = prepare_faces(ctx, rec, T_world_part.inverse(), u);
+    const auto frames = prepare_faces(ctx, rec, T_world_part.inverse(), u, untrusted);
     // Features are independent of each other: spread over the cores.
     std::vector<FeatureResult> measured(recipe.features.size());
     core::parallel_for(recipe.features.size(), config.threads, [&](std::size_t i, unsigned) {
         measured[i] = skeleton(recipe.features[i]);
         measure_one(ctx, frames, recipe.features[i], measured[i]);
     });
+    if (!untrusted.empty())
+        measure_with_untrusted(ctx, rec, T_world_part.inverse(), u, untrusted, measured);
     for (FeatureResult& r : measured) {
         judge(rec, recipe.material, out.growth, config.temperature_u_c, r);
         out.features.push_back(std::move(r));

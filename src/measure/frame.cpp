@@ -131,12 +131,20 @@ void bucket_by_z(FaceFrame& fr, std::vector<FaceFrame::Near> near, double z_lo, 
 }  // namespace
 
 FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_world,
-                     const std::vector<Eigen::Vector3d>* u, double r_max, double z_lo,
-                     double z_hi) {
+                     const std::vector<Eigen::Vector3d>* u,
+                     const std::vector<core::UntrustedProfiles>* untrusted, double r_max,
+                     double z_lo, double z_hi) {
     FaceFrame fr;
     fr.scan = &f;
     fr.n = f.n_profiles();
     fr.w = f.width;
+    if (untrusted && !untrusted->empty()) {
+        fr.untrusted.assign(static_cast<std::size_t>(fr.n), 0);
+        for (const auto& run : *untrusted)
+            for (std::int64_t k = std::max<std::int64_t>(run.first, 0);
+                 k <= std::min(run.last, fr.n - 1); ++k)
+                fr.untrusted[static_cast<std::size_t>(k)] = 1;
+    }
     fr.M = T_part_world.linear() * f.T_world_camera.linear();
     fr.view = fr.M.col(2);
     fr.origin.resize(fr.n);
@@ -151,7 +159,8 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
         for (std::int64_t i = 0; i < fr.w; ++i) {
             const float x = f.x(k, i), z = f.z(k, i);
             if (!std::isfinite(x) || !std::isfinite(z)) continue;
-            columns[i].add(x, z);
+            columns[i].add(x, z);  // a column's ray does not depend on the compensation
+            if (fr.left_out(k)) continue;
             const Eigen::Vector3d p = fr.M * Eigen::Vector3d(x, 0.0, z) + fr.origin[k];
             const double r2 = p.x() * p.x() + p.y() * p.y();
             if (!(r2 <= r2_max && p.z() >= z_lo && p.z() <= z_hi)) continue;  // NaN-safe

@@ -51,8 +51,14 @@ struct FaceFrame {
         for (std::int64_t j = bucket[b0]; j < bucket[b1 + 1]; ++j) f(near[j]);
     }
 
+    // Profiles the compensation could not follow (empty: none): no sample of theirs is valid,
+    // and an edge test must not take them for "no return" (left_out).
+    std::vector<std::uint8_t> untrusted;
+    bool left_out(std::int64_t k) const {
+        return !untrusted.empty() && k >= 0 && k < n && untrusted[static_cast<std::size_t>(k)];
+    }
     bool valid(std::int64_t k, std::int64_t i) const {
-        return k >= 0 && k < n && i >= 0 && i < w && std::isfinite(scan->x(k, i)) &&
+        return k >= 0 && k < n && i >= 0 && i < w && !left_out(k) && std::isfinite(scan->x(k, i)) &&
                std::isfinite(scan->z(k, i));
     }
     Eigen::Vector3d point(std::int64_t k, std::int64_t i) const {
@@ -73,9 +79,12 @@ struct FaceFrame {
 };
 
 // `r_max`, `z_lo`, `z_hi`: the part's bounding cylinder (hot, with margin), part frame. `u`:
-// the sensor's world displacement per profile (compensation), or null.
+// the sensor's world displacement per profile (compensation), or null. `untrusted`: runs of
+// profiles left out of the frame, or null.
 FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_world,
-                     const std::vector<Eigen::Vector3d>* u, double r_max, double z_lo, double z_hi);
+                     const std::vector<Eigen::Vector3d>* u,
+                     const std::vector<core::UntrustedProfiles>* untrusted, double r_max,
+                     double z_lo, double z_hi);
 
 // Expected hot geometry: nominal × growth, and how much to widen windows for what is unknown.
 struct Expect {

@@ -53,6 +53,17 @@ void add_method(const measure::FeatureResult& f, nlohmann::json& fj) {
     }
 }
 
+nlohmann::json untrusted_json(const std::vector<core::UntrustedProfiles>& runs) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& run : runs)
+        out.push_back({{"first_profile", run.first},
+                       {"last_profile", run.last},
+                       {"from_s", run.t0_s},
+                       {"to_s", run.t1_s},
+                       {"cause", run.cause}});
+    return out;
+}
+
 }  // namespace
 
 FaceSummary summarize(const core::FaceScan& f) {
@@ -88,20 +99,20 @@ PartResult run(const core::Recording& rec, const core::Recipe& recipe, const Pip
         r.warnings.push_back("recording names recipe '" + rec.recipe + "', measured with '" +
                              recipe.name + "'");
     measure::FaceDisplacements u;
+    measure::FaceUntrusted untrusted;
     if (o.compensate) {
         const auto t0 = Clock::now();
         r.compensated = true;
         for (const auto& face : rec.faces) {
             auto fc = compensate::compensate_face(face, o.compensation);
             r.compensation.push_back({fc.face, fc.applied, fc.degraded, fc.reasons, fc.n_degraded,
-                                      fc.peak_mm, fc.rms_mm, fc.rate_hz});
-            // Trouble that touches profiles degrades the part; trouble only in the margins
-            // (no profile's displacement depends on it) is a warning.
+                                      fc.peak_mm, fc.rms_mm, fc.rate_hz, fc.untrusted});
+            // What compensation found is a warning: a feature is degraded only when it could
+            // not be measured without the profiles it touched (measure_part).
             for (const auto& why : fc.reasons)
-                (fc.degraded ? r.degraded_reasons : r.warnings)
-                    .push_back(face.name + ": compensation: " + why);
-            r.degraded = r.degraded || fc.degraded;
+                r.warnings.push_back(face.name + ": compensation: " + why);
             if (fc.applied) u.emplace(face.name, std::move(fc.u_mm));
+            if (!fc.untrusted.empty()) untrusted.emplace(face.name, std::move(fc.untrusted));
         }
         r.stage_ms.emplace_back("compensate", ms_since(t0));
     }
@@ -129,6 +140,9 @@ PartResult run(const core::Recording& rec, const core::Recipe& recipe, const Pip
         // The hot part is larger than the cold model: scale it when the temperature is known,
         // let ICP estimate the scale when it is not.
         if (rec.temperature_c) cfg.scale = recipe.material.growth(*rec.temperature_c);
+        // Every profile, the untrusted ones too: their bridged displacement is noisy, not biased,
+        // while leaving a band of a face out tilts the nominal model towards the other surfaces
+        // (measured: a side height 0.030 mm off instead of 0.011, docs/compensation.md).
         r.match = match::match(*model, rec, u, cfg);
         r.stage_ms.emplace_back("match", ms_since(t0));
         if (!r.match->found) {
@@ -139,8 +153,13 @@ PartResult run(const core::Recording& rec, const core::Recipe& recipe, const Pip
         r.pose_source = "match";
     }
     const auto t1 = Clock::now();
-    r.measurement = measure::measure_part(recipe, rec, *T_world_part, u, o.measure);
+    r.measurement = measure::measure_part(recipe, rec, *T_world_part, u, o.measure, untrusted);
     r.stage_ms.emplace_back("measure", ms_since(t1));
+    for (const auto& f : r.measurement.features)
+        if (f.degraded) {
+            r.degraded = true;
+            r.degraded_reasons.push_back(f.name + ": " + f.reason);
+        }
     return r;
 }
 
@@ -193,6 +212,7 @@ std::string to_json(const PartResult& r) {
                                  {"degraded", c.degraded},
                                  {"reasons", c.reasons},
                                  {"degraded_profiles", c.n_degraded},
+                                 {"untrusted", untrusted_json(c.untrusted)},
                                  {"peak_displacement_mm", c.peak_mm},
                                  {"rms_displacement_mm", c.rms_mm},
                                  {"accel_rate_hz", c.rate_hz}});
@@ -223,6 +243,8 @@ std::string to_json(const PartResult& r) {
         fj["tolerance_mm"] = {f.tol_lower_mm, f.tol_upper_mm};
         fj["verdict"] = measure::to_string(f.verdict);
         fj["reason"] = f.reason.empty() ? json() : json(f.reason);
+        fj["degraded"] = f.degraded;
+        fj["left_out"] = f.left_out;
         const bool measured = f.hot_mm.has_value();
         fj["fit_rms_mm"] = measured ? json(f.fit_rms_mm) : json();
         fj["n_points"] = f.n_points;
@@ -283,10 +305,12 @@ std::string to_table(const PartResult& r) {
     }
     if (r.compensated)
         for (const auto& c : r.compensation) {
-            std::snprintf(line, sizeof line, "%-8s compensation %s: peak %.3f mm, rms %.3f mm%s\n",
+            std::snprintf(line, sizeof line, "%-8s compensation %s: peak %.3f mm, rms %.3f mm\n",
                           c.face.c_str(), c.applied ? "applied" : "NOT applied", c.peak_mm,
-                          c.rms_mm, c.degraded ? ", DEGRADED" : "");
+                          c.rms_mm);
             s += line;
+            for (const auto& run : c.untrusted)
+                s += "         left out of the fits: " + core::describe(c.face, run) + "\n";
         }
     else
         s += "vibration compensation: off\n";

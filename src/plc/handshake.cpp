@@ -13,7 +13,7 @@ Verdict overall_verdict(const std::vector<FeatureValue>& features, bool degraded
     };
     if (any(Verdict::kNok)) return Verdict::kNok;
     if (any(Verdict::kNotMeasured)) return Verdict::kNotMeasured;
-    return degraded ? Verdict::kDegraded : Verdict::kOk;
+    return degraded || any(Verdict::kDegraded) ? Verdict::kDegraded : Verdict::kOk;
 }
 
 core::Result<void> check_result(const PartResult& r) {
@@ -31,8 +31,8 @@ core::Result<void> check_result(const PartResult& r) {
             return core::make_error(what + ": slot used twice");
         used[static_cast<std::size_t>(f.slot)] = true;
         if (f.verdict != Verdict::kOk && f.verdict != Verdict::kNok &&
-            f.verdict != Verdict::kNotMeasured)
-            return core::make_error(what + ": verdict must be OK, NOK or not measured");
+            f.verdict != Verdict::kNotMeasured && f.verdict != Verdict::kDegraded)
+            return core::make_error(what + ": verdict must be OK, NOK, not measured or degraded");
         if (to_um(f.value_mm) == kInvalidInt32 && f.verdict != Verdict::kNotMeasured)
             return core::make_error(what + ": no valid value but verdict " + to_string(f.verdict));
     }

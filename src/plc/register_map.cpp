@@ -171,7 +171,7 @@ const std::vector<Row>& status_rows() {
         {ir::kFeatureCount, 1, "uint16", "feature count", "features in the result, 0 when none"},
         {ir::kTemperature, 1, "int16", "part temperature",
          "0.1 °C (10500 = 1050.0 °C); -32768 unknown"},
-        {ir::kMapVersionReg, 1, "uint16", "map version", "1 for this map"},
+        {ir::kMapVersionReg, 1, "uint16", "map version", "2 for this map"},
     };
     return rows;
 }

@@ -15,11 +15,13 @@ struct CompensationConfig {
     double highpass_hz = 1.5;     // below this nothing is trusted (noise grows as 1/f²)
     int highpass_order = 4;       // Butterworth magnitude order of the zero-phase high-pass
     double taper_s = 0.25;        // Tukey taper at each end of the record (inside the margins)
-    double min_margin_s = 0.5;    // profiles closer than this to a record end are degraded
+    double min_margin_s = 0.5;    // profiles closer than this to a record end are untrusted
     double clock_offset_s = 0.0;  // accelerometer clock − camera clock
     double gap_factor = 3.0;      // a sample interval above gap_factor × nominal is a gap
     double clip_mps2 = 8.0 * 9.80665 * 0.999;  // |a| at or above this on any axis: clipped
-    double degrade_pad_s = 0.05;  // profiles this close to a gap or clipped sample: degraded
+    // Profiles this close to a gap, a clipped or a non-finite sample are untrusted: measured in
+    // test_compensate GapErrorByDistanceIsWhyThePadExists (docs/compensation.md "Gaps").
+    double degrade_pad_s = 0.1;
 };
 
 // Displacement from uniformly sampled acceleration (one axis, SI units in, same units·s² out):
@@ -34,14 +36,18 @@ struct FaceCompensation {
     bool degraded = false;                       // some profiles could not be compensated reliably
     std::vector<std::string> reasons;            // why degraded / not applied
     std::vector<Eigen::Vector3d> u_mm;           // per profile, world frame (0 where not applied)
-    std::vector<std::uint8_t> profile_degraded;  // per profile
+    std::vector<std::uint8_t> profile_degraded;  // per profile: 1 = untrusted
     std::int64_t n_degraded = 0;
-    double peak_mm = 0.0, rms_mm = 0.0;  // of |u| over the profiles
-    double rate_hz = 0.0;                // resampling rate used
+    std::vector<core::UntrustedProfiles> untrusted;  // the same as runs, with their cause
+    double peak_mm = 0.0, rms_mm = 0.0;              // of |u| over the profiles
+    double rate_hz = 0.0;                            // resampling rate used
 };
 
 // Per-profile world displacement of one face's sensor. Never throws: bad or missing samples make
-// the result degraded (with reasons), not an error.
+// the result degraded (with reasons and the untrusted profiles), not an error. Gaps, and the
+// non-finite and clipped samples left out, are bridged: the velocity and position change the
+// straight-line fill got wrong across each is estimated by least squares (docs/compensation.md
+// "Gaps").
 FaceCompensation compensate_face(const core::FaceScan& face, const CompensationConfig& config);
 
 }  // namespace hotgauge::compensate

@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -46,6 +47,19 @@ struct FaceScan {
                profile_positions_mm[k] * scan_direction;
     }
 };
+
+// A run of one face's profiles whose data is not known to the measurement's budget: the
+// compensation could not follow the head there (docs/compensation.md "Gaps and degraded
+// features"). Measurement leaves them out of every fit that can do without them.
+struct UntrustedProfiles {
+    std::int64_t first = 0, last = 0;  // profile indices, inclusive
+    double t0_s = 0, t1_s = 0;         // their times, seconds after the face's first profile
+    std::string cause;                 // "accelerometer gap", "clipped accelerometer samples", ...
+};
+// "top profiles 412–471 (1.061–1.121 s): accelerometer gap"
+std::string describe(const std::string& face, const UntrustedProfiles& u);
+// Per face, its untrusted runs; a face not in it is trusted throughout.
+using FaceUntrusted = std::map<std::string, std::vector<UntrustedProfiles>>;
 
 struct Recording {
     std::string part_id;

@@ -44,7 +44,10 @@ struct MeasureConfig {
     double temperature_u_c = 5.0;
 };
 
-enum class Verdict { kOk, kNok, kNotMeasured };
+// kDegraded: measured, but only with profiles the compensation could not follow (an
+// accelerometer gap, bad samples, the record's end): the value is reported and must not sort the
+// part, whatever its deviation (docs/compensation.md "Gaps and degraded features").
+enum class Verdict { kOk, kNok, kNotMeasured, kDegraded };
 const char* to_string(Verdict v);
 
 // How one end of a height, or the edge of a diameter, was found (docs/measurement.md):
@@ -67,7 +70,11 @@ struct FeatureResult {
     int slot = 0;
     std::vector<std::string> faces;
     Verdict verdict = Verdict::kNotMeasured;
-    std::string reason;               // why not measured / why NOK; empty when OK
+    std::string reason;  // why not measured / NOK / degraded; empty when OK
+    // Untrusted profiles of its faces (core::describe of each run): left out of its fits, or,
+    // when it could not be measured without them, used and the feature degraded.
+    std::vector<std::string> left_out;
+    bool degraded = false;
     std::optional<double> hot_mm;     // as measured at the part temperature
     std::optional<double> cold_mm;    // hot / (1 + α(T)·(T − 20)); needs the temperature
     std::optional<double> u_cold_mm;  // cold_mm's standard uncertainty: u_mm and the pyrometer's
@@ -93,13 +100,17 @@ struct PartMeasurement {
 
 // Per-face world displacement of the sensor per profile (compensation); absent = none.
 using FaceDisplacements = std::map<std::string, std::vector<Eigen::Vector3d>>;
+// Per face, the runs of profiles the compensation could not follow; absent = all trusted.
+using FaceUntrusted = core::FaceUntrusted;
 
-// Measures every feature of `recipe` on `rec`, with the part at `T_world_part`.
-// Never throws; what cannot be measured is reported as such with a reason.
+// Measures every feature of `recipe` on `rec`, with the part at `T_world_part`. Untrusted
+// profiles are left out of every feature's fits; a feature that cannot be measured without them
+// is measured with them and degraded. Never throws; what cannot be measured is reported as such
+// with a reason.
 PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& rec,
                              const Eigen::Isometry3d& T_world_part,
                              const FaceDisplacements& u_world_mm = {},
-                             const MeasureConfig& config = {});
+                             const MeasureConfig& config = {}, const FaceUntrusted& untrusted = {});
 
 }  // namespace hotgauge::measure
 

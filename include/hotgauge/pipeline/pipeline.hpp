@@ -34,6 +34,7 @@ struct FaceCompensationSummary {
     std::vector<std::string> reasons;
     std::int64_t n_degraded = 0;
     double peak_mm = 0, rms_mm = 0, rate_hz = 0;
+    std::vector<core::UntrustedProfiles> untrusted;  // the profiles it could not follow
 };
 
 // What was acquired on one face: enough for an engineer to judge the data before the numbers.
@@ -55,7 +56,9 @@ struct PartResult {
     std::vector<FaceSummary> faces;
     bool compensated = false;  // compensation was requested and ran
     std::vector<FaceCompensationSummary> compensation;
-    bool degraded = false;  // some data could not be trusted fully
+    // A feature is degraded (measured only with untrusted profiles), or the cell found the data
+    // wanting (daemon: part temperature unknown): one reason each.
+    bool degraded = false;
     std::vector<std::string> degraded_reasons;
     measure::PartMeasurement measurement;
     std::vector<std::string> warnings;                     // reader findings, degraded conditions

@@ -25,7 +25,7 @@ struct FeatureValue {
     std::string name;                         // for logs only
     int slot = 0;                             // register block 1..kMaxFeatures
     std::optional<double> value_mm;           // absent: not measured (verdict must say so)
-    Verdict verdict = Verdict::kNotMeasured;  // kOk, kNok or kNotMeasured
+    Verdict verdict = Verdict::kNotMeasured;  // kOk, kNok, kNotMeasured or kDegraded
 };
 
 struct PartResult {
@@ -35,7 +35,7 @@ struct PartResult {
 };
 
 // The overall verdict by the documented rule: any NOK -> NOK; else any not measured -> not
-// measured; else degraded if `degraded`; else OK (also for no features: nothing failed).
+// measured; else degraded if `degraded` or any feature is; else OK (also for no features).
 Verdict overall_verdict(const std::vector<FeatureValue>& features, bool degraded);
 
 // Checks slots, verdict values and consistency (a missing value is never OK or NOK; overall OK

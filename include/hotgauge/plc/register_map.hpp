@@ -14,7 +14,8 @@
 
 namespace hotgauge::plc {
 
-inline constexpr std::uint16_t kMapVersion = 1;
+// 2: per-feature verdict 4 degraded (a value the data cannot vouch for), docs/plc-modbus.md.
+inline constexpr std::uint16_t kMapVersion = 2;
 inline constexpr int kMaxFeatures = 16;
 
 // Holding registers: 0..5 are written by the PLC (the only writable block); the input registers
@@ -61,9 +62,10 @@ constexpr std::uint16_t feature(int slot) {
 
 enum class State : std::uint16_t { kIdle = 1, kBusy = 2, kDone = 3, kFault = 4 };
 enum class Command : std::uint16_t { kNone = 0, kTrigger = 1, kAck = 2, kReset = 3 };
-// Per feature: kNone (no result), kOk, kNok, kNotMeasured. Overall: also kDegraded (every
-// feature in tolerance, but the data behind them was degraded: accelerometer gap, stale
-// temperature...; the PLC's policy decides).
+// Per feature: kNone (no result), kOk, kNok, kNotMeasured, kDegraded (measured only with
+// profiles the compensation could not follow: the value is given, it sorts nothing). Overall:
+// NOK when a feature is NOK, else not measured, else degraded when a feature is or the cell
+// found the data wanting (part temperature unknown), else OK.
 enum class Verdict : std::uint16_t {
     kNone = 0,
     kOk = 1,
