@@ -210,7 +210,10 @@ def check_order(tmp, recipe, name, wordorder):
         plc.write(0, [ACK])
         regs = cycle(plc, 999996)
         assert regs[11] == 4, "overall degraded"
-        assert all(got[2] == 1 for s, got in features_of(regs, plc).items() if s <= 13)
+        got = features_of(regs, plc)
+        nominal4 = round(recipe["features"][3]["nominal_mm"] * 1000)
+        assert got[4][0] == nominal4 + 1000 and got[4][2] == 4, f"degraded, not NOK: {got[4]}"
+        assert all(g[2] == 1 for s, g in got.items() if s <= 13 and s != 4)
         plc.write(0, [ACK])
 
         # FAULT: only a reset leaves it.

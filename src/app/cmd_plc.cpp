@@ -63,7 +63,7 @@ core::Result<PlcFileConfig> read_plc_config(const std::string& file) {
 constexpr std::uint32_t kFaultPart = 999999;        // FAULT 201 (measurement failed)
 constexpr std::uint32_t kNotMeasuredPart = 999998;  // slot 3 not measured
 constexpr std::uint32_t kNokPart = 999997;          // slot 1 nominal + 1.000 mm: NOK
-constexpr std::uint32_t kDegradedPart = 999996;     // all OK, overall degraded
+constexpr std::uint32_t kDegradedPart = 999996;     // slot 4 degraded (+1 mm), overall degraded
 
 struct ServeArgs {
     std::string config = HOTGAUGE_CONFIG_DIR "/plc.yaml";
@@ -87,10 +87,13 @@ plc::PartResult demo_result(const core::Recipe& recipe, std::uint32_t part_id) {
         const auto dev_um =
             static_cast<int>((std::uint64_t{part_id} + static_cast<unsigned>(f.slot)) % 5) - 2;
         double value = f.nominal_mm + dev_um * 0.010;
-        if (part_id == kNokPart && f.slot == 1) value = f.nominal_mm + 1.0;
+        if ((part_id == kNokPart && f.slot == 1) || (part_id == kDegradedPart && f.slot == 4))
+            value = f.nominal_mm + 1.0;
         if (part_id != kNotMeasuredPart || f.slot != 3) v.value_mm = value;
         if (!v.value_mm)
             v.verdict = plc::Verdict::kNotMeasured;
+        else if (part_id == kDegradedPart && f.slot == 4)  // out of tolerance, but degraded
+            v.verdict = plc::Verdict::kDegraded;
         else if (value - f.nominal_mm < f.tol_lower_mm - 1e-9 ||
                  value - f.nominal_mm > f.tol_upper_mm + 1e-9)
             v.verdict = plc::Verdict::kNok;
@@ -98,7 +101,7 @@ plc::PartResult demo_result(const core::Recipe& recipe, std::uint32_t part_id) {
             v.verdict = plc::Verdict::kOk;
         r.features.push_back(v);
     }
-    r.overall = plc::overall_verdict(r.features, part_id == kDegradedPart);
+    r.overall = plc::overall_verdict(r.features, false);
     return r;
 }
 
