@@ -131,15 +131,21 @@ std::vector<std::string> untrusted_of(const FeatureSpec& f, const FaceUntrusted&
     return out;
 }
 
-// The features that could not be measured around the untrusted profiles, measured again with
-// them: degraded when that works, and otherwise not measured for the reason the full data gives.
+// A feature relies on untrusted profiles when it cannot be measured without them, or when
+// leaving them out took more than half of its points: what is left is too thin to vouch for the
+// value (measured: a side height on 45 of its points, 0.033 mm off, docs/compensation.md).
+constexpr double kMinTrustedShare = 0.5;
+
+// The features of faces with untrusted profiles, measured again with them: a feature that relies
+// on them takes that value and is degraded; one that is not measurable with them either is not
+// measured, for the reason the full data gives; the others keep their value without them.
 void measure_with_untrusted(const detail::Context& ctx, const core::Recording& rec,
                             const Eigen::Isometry3d& T_part_world, const FaceDisplacements& u,
                             const FaceUntrusted& untrusted, std::vector<FeatureResult>& measured) {
     std::vector<std::size_t> retry;
     for (std::size_t i = 0; i < measured.size(); ++i) {
         measured[i].left_out = untrusted_of(ctx.recipe.features[i], untrusted);
-        if (!measured[i].hot_mm && !measured[i].left_out.empty()) retry.push_back(i);
+        if (!measured[i].left_out.empty()) retry.push_back(i);
     }
     if (retry.empty()) return;
     const auto frames = prepare_faces(ctx, rec, T_part_world, u, {});
@@ -147,6 +153,10 @@ void measure_with_untrusted(const detail::Context& ctx, const core::Recording& r
         FeatureResult& r = measured[retry[j]];
         FeatureResult again = skeleton(ctx.recipe.features[retry[j]]);
         measure_one(ctx, frames, ctx.recipe.features[retry[j]], again);
+        const bool thin = r.hot_mm && again.hot_mm &&
+                          static_cast<double>(r.n_points) <
+                              kMinTrustedShare * static_cast<double>(again.n_points);
+        if (r.hot_mm && !thin) return;  // measured around them
         again.left_out = std::move(r.left_out);
         again.degraded = again.hot_mm.has_value();
         r = std::move(again);
