@@ -81,46 +81,49 @@ std::vector<double> integrate_twice(const std::vector<double>& accel, double rat
 
 namespace {
 
-// Double integration of a record with gaps (filled by straight lines): what the fill got wrong
-// changes the velocity and the position across each gap, an error that the high-pass spreads
-// hundreds of milliseconds around it. Both are unknowns: the response to a constant and to a
-// ramp over each gap is added with the weights that make the displacement smallest outside the
-// gaps (a vibration has no drift), by least squares.
-std::vector<double> integrate_across_gaps(const std::vector<double>& accel, double rate_hz,
-                                          const std::vector<GridGap>& gaps,
-                                          const CompensationConfig& c) {
-    std::vector<double> u = integrate_twice(accel, rate_hz, c);
-    if (gaps.empty()) return u;
-    const std::size_t n = accel.size();
-    std::vector<std::vector<double>> basis;
-    for (const GridGap& g : gaps) {
-        std::vector<double> box(n, 0.0), ramp(n, 0.0);
-        const double mid = 0.5 * static_cast<double>(g.first + g.last);
-        for (std::size_t i = g.first; i <= g.last && i < n; ++i) {
+// Double integration of a record with gaps (filled by straight lines), per world axis: what the
+// fill got wrong changes the velocity and the position across each gap, an error that the
+// high-pass spreads hundreds of milliseconds around it. Both are unknowns: the response to a
+// constant and to a ramp over each gap (the same for every axis) is added with the weights that
+// make the displacement smallest outside the gaps and the tapers (a vibration has no drift), by
+// least squares; a tiny ridge keeps a gap no used sample sees from making it singular.
+std::array<std::vector<double>, 3> integrate_across_gaps(
+    const std::array<std::vector<double>, 3>& accel, double rate_hz,
+    const std::vector<GridGap>& gaps, const CompensationConfig& c) {
+    std::array<std::vector<double>, 3> u;
+    for (int k = 0; k < 3; ++k) u[k] = integrate_twice(accel[k], rate_hz, c);
+    const auto n = static_cast<Eigen::Index>(accel[0].size());
+    if (gaps.empty() || n == 0) return u;
+    const auto m = static_cast<Eigen::Index>(2 * gaps.size());
+    Eigen::MatrixXd B(n, m);
+    for (std::size_t g = 0; g < gaps.size(); ++g) {
+        std::vector<double> box(static_cast<std::size_t>(n), 0.0), ramp = box;
+        const double mid = 0.5 * static_cast<double>(gaps[g].first + gaps[g].last);
+        for (std::size_t i = gaps[g].first; i <= gaps[g].last && i < box.size(); ++i) {
             box[i] = 1.0;
             ramp[i] = static_cast<double>(i) - mid;
         }
-        basis.push_back(integrate_twice(box, rate_hz, c));
-        basis.push_back(integrate_twice(ramp, rate_hz, c));
+        B.col(static_cast<Eigen::Index>(2 * g)) =
+            Eigen::Map<const Eigen::VectorXd>(integrate_twice(box, rate_hz, c).data(), n);
+        B.col(static_cast<Eigen::Index>(2 * g + 1)) =
+            Eigen::Map<const Eigen::VectorXd>(integrate_twice(ramp, rate_hz, c).data(), n);
     }
-    std::vector<std::uint8_t> use(n, 1);
-    const auto ramp_n = static_cast<std::size_t>(c.taper_s * rate_hz);
-    for (std::size_t i = 0; i < std::min(n, ramp_n); ++i) use[i] = use[n - 1 - i] = 0;
+    Eigen::VectorXd use = Eigen::VectorXd::Ones(n);
+    const auto ends = std::min<Eigen::Index>(n / 2, static_cast<Eigen::Index>(c.taper_s * rate_hz));
+    use.head(ends).setZero();
+    use.tail(ends).setZero();
     for (const GridGap& g : gaps)
-        for (std::size_t i = g.first; i <= g.last && i < n; ++i) use[i] = 0;
-    const auto m = static_cast<Eigen::Index>(basis.size());
-    Eigen::MatrixXd AtA = Eigen::MatrixXd::Zero(m, m);
-    Eigen::VectorXd Atb = Eigen::VectorXd::Zero(m);
-    for (std::size_t i = 0; i < n; ++i) {
-        if (!use[i]) continue;
-        for (Eigen::Index p = 0; p < m; ++p) {
-            Atb(p) -= basis[p][i] * u[i];
-            for (Eigen::Index q = 0; q < m; ++q) AtA(p, q) += basis[p][i] * basis[q][i];
-        }
+        for (auto i = static_cast<Eigen::Index>(g.first);
+             i <= static_cast<Eigen::Index>(g.last) && i < n; ++i)
+            use(i) = 0.0;
+    Eigen::MatrixXd BtWB = B.transpose() * use.asDiagonal() * B;
+    BtWB.diagonal().array() += 1e-12 * (BtWB.trace() / static_cast<double>(m) + 1e-30);
+    const auto ldlt = BtWB.ldlt();
+    for (int k = 0; k < 3; ++k) {
+        Eigen::Map<Eigen::VectorXd> uk(u[k].data(), n);
+        const Eigen::VectorXd w = ldlt.solve(-(B.transpose() * use.asDiagonal() * uk));
+        if (w.allFinite()) uk += B * w;
     }
-    const Eigen::VectorXd w = AtA.ldlt().solve(Atb);
-    for (Eigen::Index p = 0; p < m; ++p)
-        for (std::size_t i = 0; i < n; ++i) u[i] += w(p) * basis[p][i];
     return u;
 }
 
@@ -306,8 +309,7 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
         const auto g1 = static_cast<std::size_t>(std::ceil((b.t1 - t0) / period)) - 1;
         if (b.t1 > b.t0 && g1 >= g0) grid_gaps.push_back({g0, g1});
     }
-    std::array<std::vector<double>, 3> u;
-    for (int k = 0; k < 3; ++k) u[k] = integrate_across_gaps(grid[k], out.rate_hz, grid_gaps, c);
+    const auto u = integrate_across_gaps(grid, out.rate_hz, grid_gaps, c);
 
     const std::size_t n = u[0].size();
     double sum2 = 0.0;
