@@ -571,36 +571,39 @@ core::Recording with_lost_datagrams(const core::Recording& rec, double fraction,
 
 // Lost accelerometer datagrams must never make a good part NOK (issue 18 found 2–30 % loss
 // reading 0.09–0.9 mm off and, at 30 %, both good parts NOK): every feature is OK within
-// 0.03 mm, or degraded, or not measured.
+// 0.02 mm (issue 18's bound), or degraded, or not measured.
 TEST(CompensatedMeasurement, LostDatagramsNeverMakeAGoodPartNok) {
-    const auto s = simulate_full(34, 1050.0);
-    ASSERT_TRUE(s);
-    for (double fraction : {0.02, 0.05, 0.1, 0.3}) {
-        const auto r =
-            pipeline::run(with_lost_datagrams(s->recording, fraction, 7), env().recipe, {});
-        ASSERT_TRUE(r.match && r.match->found) << fraction;
-        int ok = 0, degraded = 0, not_measured = 0;
-        double worst_ok = 0, worst_degraded = 0;
-        for (std::size_t j = 0; j < r.measurement.features.size(); ++j) {
-            const auto& f = r.measurement.features[j];
-            EXPECT_NE(f.verdict, measure::Verdict::kNok) << f.name << " at " << fraction;
-            if (!f.hot_mm) {
-                ++not_measured;
-                continue;
+    for (std::uint64_t seed : {34, 35}) {
+        const auto s = simulate_full(seed, 1000.0 + 50.0 * static_cast<double>(seed - 34));
+        ASSERT_TRUE(s);
+        for (double fraction : {0.02, 0.05, 0.1, 0.3}) {
+            const auto r =
+                pipeline::run(with_lost_datagrams(s->recording, fraction, seed), env().recipe, {});
+            ASSERT_TRUE(r.match && r.match->found) << fraction;
+            int ok = 0, degraded = 0, not_measured = 0;
+            double worst_ok = 0, worst_degraded = 0;
+            for (std::size_t j = 0; j < r.measurement.features.size(); ++j) {
+                const auto& f = r.measurement.features[j];
+                EXPECT_NE(f.verdict, measure::Verdict::kNok) << f.name << " at " << fraction;
+                if (!f.hot_mm) {
+                    ++not_measured;
+                    continue;
+                }
+                const double e = std::abs(*f.hot_mm - s->truth.features[j].hot_mm);
+                if (f.degraded) {
+                    ++degraded;
+                    worst_degraded = std::max(worst_degraded, e);
+                } else {
+                    ++ok;
+                    worst_ok = std::max(worst_ok, e);
+                    EXPECT_LT(e, 0.02) << f.name << " at " << fraction << ", not flagged";
+                }
             }
-            const double e = std::abs(*f.hot_mm - s->truth.features[j].hot_mm);
-            if (f.degraded) {
-                ++degraded;
-                worst_degraded = std::max(worst_degraded, e);
-            } else {
-                ++ok;
-                worst_ok = std::max(worst_ok, e);
-                EXPECT_LT(e, 0.03) << f.name << " at " << fraction << ", not flagged";
-            }
+            std::printf(
+                "seed %llu, %2.0f %% of the datagrams lost: %d OK (worst %.4f mm), %d "
+                "degraded (worst %.4f mm), %d not measured; part %s\n",
+                static_cast<unsigned long long>(seed), 100 * fraction, ok, worst_ok, degraded,
+                worst_degraded, not_measured, measure::to_string(r.measurement.verdict));
         }
-        std::printf("%2.0f %% of the datagrams lost: %d OK (worst %.4f mm), %d degraded (worst "
-                    "%.4f mm), %d not measured; part %s\n",
-                    100 * fraction, ok, worst_ok, degraded, worst_degraded, not_measured,
-                    measure::to_string(r.measurement.verdict));
     }
 }
