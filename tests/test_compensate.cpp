@@ -607,3 +607,35 @@ TEST(CompensatedMeasurement, LostDatagramsNeverMakeAGoodPartNok) {
         }
     }
 }
+
+// The daemon runs the pipeline in steps (pipeline::PartRun): the pose and the other faces'
+// features while the last face's accelerometer margin is still arriving, the last face after.
+// It must give exactly what the offline tool's run() gives on the finished recording.
+TEST(PartRun, InStepsWithAGrowingRecordIsExactlyRun) {
+    const auto s = simulate(env().cell, 16);
+    const auto whole = pipeline::run(s.recording, env().recipe, {});
+    ASSERT_TRUE(whole.match && whole.match->found);
+    core::Recording growing = s.recording;  // as the daemon has it at the last profile
+    core::FaceScan& last = growing.faces.back();
+    std::size_t keep = 0;
+    while (keep < last.accel_times_ns.size() &&
+           last.accel_times_ns[keep] <= last.profile_times_ns.back() + 20'000'000)
+        ++keep;
+    last.accel_times_ns.resize(keep);
+    last.accel_mps2.resize(3 * keep);
+    pipeline::PartRun run(growing, env().recipe, {});
+    run.measure_all_but_last();
+    last.accel_times_ns = s.recording.faces.back().accel_times_ns;  // the margin arrived
+    last.accel_mps2 = s.recording.faces.back().accel_mps2;
+    const auto steps = run.finish();
+    ASSERT_TRUE(steps.match && steps.match->found);
+    EXPECT_TRUE(steps.match->T_world_part.isApprox(whole.match->T_world_part, 0.0));
+    ASSERT_EQ(steps.measurement.features.size(), whole.measurement.features.size());
+    for (std::size_t j = 0; j < whole.measurement.features.size(); ++j) {
+        const auto &a = steps.measurement.features[j], &b = whole.measurement.features[j];
+        EXPECT_EQ(a.hot_mm, b.hot_mm) << a.name;  // bit for bit
+        EXPECT_EQ(a.verdict, b.verdict) << a.name;
+        EXPECT_EQ(a.u_mm, b.u_mm) << a.name;
+    }
+    EXPECT_EQ(steps.warnings, whole.warnings);
+}

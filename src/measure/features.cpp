@@ -18,8 +18,11 @@ using core::FeatureSpec;
 constexpr double kMinTemperatureC = -50.0;
 constexpr double kMaxTemperatureC = 1600.0;
 
-void measure_one(const detail::Context& ctx, const std::map<std::string, detail::FaceFrame>& frames,
-                 const FeatureSpec& f, FeatureResult& r) {
+// The prepared faces a feature may use, by name.
+using FrameRefs = std::map<std::string, const detail::FaceFrame*>;
+
+void measure_one(const detail::Context& ctx, const FrameRefs& frames, const FeatureSpec& f,
+                 FeatureResult& r) {
     std::vector<const detail::FaceFrame*> used;
     for (const auto& name : f.faces) {
         auto it = frames.find(name);
@@ -27,7 +30,7 @@ void measure_one(const detail::Context& ctx, const std::map<std::string, detail:
             r.reason = "face '" + name + "' is not in the recording";
             return;
         }
-        used.push_back(&it->second);
+        used.push_back(it->second);
     }
     if (f.kind == core::FeatureKind::kDiameter)
         detail::measure_diameter(ctx, f, used, r);
@@ -58,13 +61,12 @@ Verdict overall(const std::vector<FeatureResult>& features) {
     return any_not ? Verdict::kNotMeasured : any_degraded ? Verdict::kDegraded : Verdict::kOk;
 }
 
-// Every face in the part frame, within the part's bounding cylinder (hot, with room for an
-// unknown temperature and the edge windows); faces are independent: spread over the cores.
-std::map<std::string, detail::FaceFrame> prepare_faces(const detail::Context& ctx,
-                                                       const core::Recording& rec,
-                                                       const Eigen::Isometry3d& T_part_world,
-                                                       const FaceDisplacements& u,
-                                                       const FaceUntrusted& untrusted) {
+// The part's bounding cylinder in its frame (hot, with room for an unknown temperature and the
+// edge windows): the samples a face keeps near the part.
+struct Bounds {
+    double r_max, z_lo, z_hi;
+};
+Bounds part_bounds(const detail::Context& ctx) {
     double z_min = 0.0, z_max = 0.0;
     for (const auto& [name, z] : ctx.recipe.levels_mm) {
         z_min = std::min(z_min, z);
@@ -72,20 +74,8 @@ std::map<std::string, detail::FaceFrame> prepare_faces(const detail::Context& ct
     }
     const double margin = 5.0;
     const double gmax = ctx.ex.g * (1.0 + ctx.ex.slack);
-    std::vector<detail::FaceFrame> prepared(rec.faces.size());
-    core::parallel_for(rec.faces.size(), ctx.c.threads, [&](std::size_t i, unsigned) {
-        const auto& face = rec.faces[i];
-        auto it = u.find(face.name);
-        auto un = untrusted.find(face.name);
-        prepared[i] = detail::make_frame(
-            face, T_part_world, it == u.end() ? nullptr : &it->second,
-            un == untrusted.end() ? nullptr : &un->second, ctx.solid.max_radius() * gmax + margin,
-            std::min(z_min, z_min * gmax) - margin, std::max(z_max, z_max * gmax) + margin);
-    });
-    std::map<std::string, detail::FaceFrame> frames;
-    for (std::size_t i = 0; i < rec.faces.size(); ++i)
-        frames.emplace(rec.faces[i].name, std::move(prepared[i]));
-    return frames;
+    return {ctx.solid.max_radius() * gmax + margin, std::min(z_min, z_min * gmax) - margin,
+            std::max(z_max, z_max * gmax) + margin};
 }
 
 // Cold equivalent, deviation and verdict of a measured feature; tolerances are on cold values.
@@ -136,31 +126,20 @@ std::vector<std::string> untrusted_of(const FeatureSpec& f, const FaceUntrusted&
 // value (measured: a side height on 45 of its points, 0.033 mm off, docs/compensation.md).
 constexpr double kMinTrustedShare = 0.5;
 
-// The features of faces with untrusted profiles, measured again with them: a feature that relies
-// on them takes that value and is degraded; one that is not measurable with them either is not
-// measured, for the reason the full data gives; the others keep their value without them.
-void measure_with_untrusted(const detail::Context& ctx, const core::Recording& rec,
-                            const Eigen::Isometry3d& T_part_world, const FaceDisplacements& u,
-                            const FaceUntrusted& untrusted, std::vector<FeatureResult>& measured) {
-    std::vector<std::size_t> retry;
-    for (std::size_t i = 0; i < measured.size(); ++i) {
-        measured[i].left_out = untrusted_of(ctx.recipe.features[i], untrusted);
-        if (!measured[i].left_out.empty()) retry.push_back(i);
+// The expected hot geometry: from the temperature when it is plausible, else with room for it.
+detail::Expect expect(const core::Recipe& recipe, const core::Recording& rec,
+                      const MeasureConfig& config, std::optional<double>& growth) {
+    detail::Expect ex;
+    if (rec.temperature_c && *rec.temperature_c >= kMinTemperatureC &&
+        *rec.temperature_c <= kMaxTemperatureC) {
+        growth = recipe.material.growth(*rec.temperature_c);
+        ex.g = *growth;
+        ex.slack = 0.002;  // α model error
+    } else {
+        ex.g = 1.0 + 0.5 * config.unknown_growth;
+        ex.slack = 0.5 * config.unknown_growth;
     }
-    if (retry.empty()) return;
-    const auto frames = prepare_faces(ctx, rec, T_part_world, u, {});
-    core::parallel_for(retry.size(), ctx.c.threads, [&](std::size_t j, unsigned) {
-        FeatureResult& r = measured[retry[j]];
-        FeatureResult again = skeleton(ctx.recipe.features[retry[j]]);
-        measure_one(ctx, frames, ctx.recipe.features[retry[j]], again);
-        const bool thin = r.hot_mm && again.hot_mm &&
-                          static_cast<double>(r.n_points) <
-                              kMinTrustedShare * static_cast<double>(again.n_points);
-        if (r.hot_mm && !thin) return;  // measured around them
-        again.left_out = std::move(r.left_out);
-        again.degraded = again.hot_mm.has_value();
-        r = std::move(again);
-    });
+    return ex;
 }
 
 }  // namespace
@@ -194,38 +173,128 @@ PartMeasurement unmeasured(const core::Recipe& recipe, const core::Recording& re
     return out;
 }
 
-PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& rec,
-                             const Eigen::Isometry3d& T_world_part, const FaceDisplacements& u,
-                             const MeasureConfig& config, const FaceUntrusted& untrusted) {
-    PartMeasurement out;
-    out.temperature_c = rec.temperature_c;
-    detail::Expect ex;
-    const bool plausible_t = rec.temperature_c && *rec.temperature_c >= kMinTemperatureC &&
-                             *rec.temperature_c <= kMaxTemperatureC;
-    if (plausible_t) {
-        out.growth = recipe.material.growth(*rec.temperature_c);
-        ex.g = *out.growth;
-        ex.slack = 0.002;  // α model error
-    } else {
-        ex.g = 1.0 + 0.5 * config.unknown_growth;
-        ex.slack = 0.5 * config.unknown_growth;
+struct PartMeasurer::Impl {
+    const core::Recording& rec;
+    Eigen::Isometry3d T_part_world;
+    std::optional<double> growth;
+    detail::Context ctx;
+    Bounds bounds;
+    // Every face added, its untrusted profiles left out; and, for the faces with untrusted runs,
+    // the same face with them (std::map: the frames do not move as faces are added).
+    std::map<std::string, detail::FaceFrame> frames, frames_all;
+    FaceUntrusted untrusted;
+    std::vector<std::optional<FeatureResult>> measured;  // per recipe feature, once measured
+
+    Impl(const core::Recipe& recipe, const core::Recording& r,
+         const Eigen::Isometry3d& T_world_part, const MeasureConfig& config)
+        : rec(r),
+          T_part_world(T_world_part.inverse()),
+          ctx{recipe, core::AxisymmetricSolid::from_recipe(recipe),
+              expect(recipe, r, config, growth), config},
+          bounds(part_bounds(ctx)),
+          measured(recipe.features.size()) {}
+
+    FrameRefs refs(const FeatureSpec& f, bool with_untrusted) const {
+        FrameRefs out;
+        for (const auto& name : f.faces) {
+            auto all = frames_all.find(name);
+            if (with_untrusted && all != frames_all.end())
+                out.emplace(name, &all->second);
+            else if (auto it = frames.find(name); it != frames.end())
+                out.emplace(name, &it->second);
+        }
+        return out;
     }
-    const detail::Context ctx{recipe, core::AxisymmetricSolid::from_recipe(recipe), ex, config};
-    const auto frames = prepare_faces(ctx, rec, T_world_part.inverse(), u, untrusted);
-    // Features are independent of each other: spread over the cores.
-    std::vector<FeatureResult> measured(recipe.features.size());
-    core::parallel_for(recipe.features.size(), config.threads, [&](std::size_t i, unsigned) {
-        measured[i] = skeleton(recipe.features[i]);
-        measure_one(ctx, frames, recipe.features[i], measured[i]);
+    bool ready(const FeatureSpec& f) const {
+        return std::all_of(f.faces.begin(), f.faces.end(),
+                           [&](const std::string& n) { return frames.contains(n); });
+    }
+    FeatureResult measure_feature(const FeatureSpec& f) const;
+};
+
+// A feature measured without the untrusted profiles of its faces; when it relies on them (not
+// measurable without them, or less than kMinTrustedShare of its points left), measured with
+// them and degraded; not measurable with them either: the full data's reason.
+FeatureResult PartMeasurer::Impl::measure_feature(const FeatureSpec& f) const {
+    FeatureResult r = skeleton(f);
+    measure_one(ctx, refs(f, false), f, r);
+    r.left_out = untrusted_of(f, untrusted);
+    if (r.left_out.empty()) return r;
+    FeatureResult again = skeleton(f);
+    measure_one(ctx, refs(f, true), f, again);
+    const bool thin =
+        r.hot_mm && again.hot_mm &&
+        static_cast<double>(r.n_points) < kMinTrustedShare * static_cast<double>(again.n_points);
+    if (r.hot_mm && !thin) return r;  // measured around them
+    again.left_out = std::move(r.left_out);
+    again.degraded = again.hot_mm.has_value();
+    return again;
+}
+
+PartMeasurer::PartMeasurer(const core::Recipe& recipe, const core::Recording& rec,
+                           const Eigen::Isometry3d& T_world_part, const MeasureConfig& config)
+    : impl_(std::make_unique<Impl>(recipe, rec, T_world_part, config)) {}
+PartMeasurer::~PartMeasurer() = default;
+
+void PartMeasurer::add_faces(const std::vector<FaceData>& faces) {
+    Impl& m = *impl_;
+    // Faces are independent: prepared over the cores, with and without their untrusted runs.
+    std::vector<std::pair<std::size_t, bool>> jobs;
+    for (std::size_t i = 0; i < faces.size(); ++i) {
+        jobs.emplace_back(i, false);
+        if (faces[i].untrusted && !faces[i].untrusted->empty()) jobs.emplace_back(i, true);
+    }
+    std::vector<detail::FaceFrame> prepared(jobs.size());
+    core::parallel_for(jobs.size(), m.ctx.c.threads, [&](std::size_t j, unsigned) {
+        const FaceData& f = faces[jobs[j].first];
+        prepared[j] =
+            detail::make_frame(*f.scan, m.T_part_world, f.u, jobs[j].second ? nullptr : f.untrusted,
+                               m.bounds.r_max, m.bounds.z_lo, m.bounds.z_hi);
     });
-    if (!untrusted.empty())
-        measure_with_untrusted(ctx, rec, T_world_part.inverse(), u, untrusted, measured);
-    for (FeatureResult& r : measured) {
-        judge(rec, recipe.material, out.growth, config.temperature_u_c, r);
+    for (std::size_t j = 0; j < jobs.size(); ++j) {
+        const FaceData& f = faces[jobs[j].first];
+        (jobs[j].second ? m.frames_all : m.frames)
+            .insert_or_assign(f.scan->name, std::move(prepared[j]));
+        if (jobs[j].second) m.untrusted[f.scan->name] = *f.untrusted;
+    }
+    // Every feature whose faces are all in: independent of each other, over the cores.
+    std::vector<std::size_t> ready;
+    for (std::size_t i = 0; i < m.measured.size(); ++i)
+        if (!m.measured[i] && m.ready(m.ctx.recipe.features[i])) ready.push_back(i);
+    core::parallel_for(ready.size(), m.ctx.c.threads, [&](std::size_t j, unsigned) {
+        m.measured[ready[j]] = m.measure_feature(m.ctx.recipe.features[ready[j]]);
+    });
+}
+
+PartMeasurement PartMeasurer::finish() {
+    Impl& m = *impl_;
+    PartMeasurement out;
+    out.temperature_c = m.rec.temperature_c;
+    out.growth = m.growth;
+    for (std::size_t i = 0; i < m.measured.size(); ++i) {
+        const FeatureSpec& f = m.ctx.recipe.features[i];
+        FeatureResult r = m.measured[i] ? std::move(*m.measured[i]) : skeleton(f);
+        if (!m.measured[i]) measure_one(m.ctx, m.refs(f, false), f, r);  // names the missing face
+        judge(m.rec, m.ctx.recipe.material, out.growth, m.ctx.c.temperature_u_c, r);
         out.features.push_back(std::move(r));
     }
     out.verdict = overall(out.features);
     return out;
+}
+
+PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& rec,
+                             const Eigen::Isometry3d& T_world_part, const FaceDisplacements& u,
+                             const MeasureConfig& config, const FaceUntrusted& untrusted) {
+    PartMeasurer m(recipe, rec, T_world_part, config);
+    std::vector<PartMeasurer::FaceData> faces;
+    for (const auto& face : rec.faces) {
+        auto it = u.find(face.name);
+        auto un = untrusted.find(face.name);
+        faces.push_back({&face, it == u.end() ? nullptr : &it->second,
+                         un == untrusted.end() ? nullptr : &un->second});
+    }
+    m.add_faces(faces);
+    return m.finish();
 }
 
 }  // namespace hotgauge::measure

@@ -88,79 +88,171 @@ FaceSummary summarize(const core::FaceScan& f) {
     return s;
 }
 
-PartResult run(const core::Recording& rec, const core::Recipe& recipe, const PipelineOptions& o) {
+namespace {
+
+// A face as known at its last profile, for the compensation: its accelerometer record up to
+// that profile (on the accelerometer's clock), without the profiles themselves.
+core::FaceScan record_until_last_profile(const core::FaceScan& f, double clock_offset_s) {
+    core::FaceScan out;
+    out.name = f.name;
+    out.T_world_camera = f.T_world_camera;
+    out.scan_direction = f.scan_direction;
+    out.R_camera_accel = f.R_camera_accel;
+    out.profile_times_ns = f.profile_times_ns;
+    if (f.profile_times_ns.empty()) return out;
+    const std::int64_t until =
+        f.profile_times_ns.back() + static_cast<std::int64_t>(clock_offset_s * 1e9);
+    std::size_t keep = 0;
+    while (keep < f.accel_times_ns.size() && f.accel_times_ns[keep] <= until) ++keep;
+    out.accel_times_ns.assign(f.accel_times_ns.begin(),
+                              f.accel_times_ns.begin() + static_cast<std::ptrdiff_t>(keep));
+    out.accel_mps2.assign(f.accel_mps2.begin(),
+                          f.accel_mps2.begin() + static_cast<std::ptrdiff_t>(3 * keep));
+    return out;
+}
+
+}  // namespace
+
+struct PartRun::Impl {
+    const core::Recording& rec;
+    const core::Recipe& recipe;
+    PipelineOptions o;
     PartResult r;
-    r.part_id = rec.part_id;
-    r.recipe = recipe.name;
-    r.captured_at = rec.captured_at;
-    r.warnings = rec.warnings;
-    for (const auto& f : rec.faces) r.faces.push_back(summarize(f));
-    if (rec.recipe != recipe.name)
-        r.warnings.push_back("recording names recipe '" + rec.recipe + "', measured with '" +
-                             recipe.name + "'");
     measure::FaceDisplacements u;
     measure::FaceUntrusted untrusted;
-    if (o.compensate) {
-        const auto t0 = Clock::now();
-        r.compensated = true;
-        for (const auto& face : rec.faces) {
-            auto fc = compensate::compensate_face(face, o.compensation);
-            r.compensation.push_back({fc.face, fc.applied, fc.degraded, fc.reasons, fc.n_degraded,
-                                      fc.peak_mm, fc.rms_mm, fc.rate_hz, fc.untrusted});
-            // What compensation found is a warning: a feature is degraded only when it could
-            // not be measured without the profiles it touched (measure_part).
-            for (const auto& why : fc.reasons)
-                r.warnings.push_back(face.name + ": compensation: " + why);
-            if (fc.applied) u.emplace(face.name, std::move(fc.u_mm));
-            if (!fc.untrusted.empty()) untrusted.emplace(face.name, std::move(fc.untrusted));
-        }
-        r.stage_ms.emplace_back("compensate", ms_since(t0));
-    }
-    std::optional<Eigen::Isometry3d> T_world_part = o.T_world_part;
-    if (T_world_part) {
+    std::optional<measure::PartMeasurer> measurer;  // none: nothing to measure (r says why)
+    std::size_t faces_added = 0;
+    double compensate_ms = 0, measure_ms = 0;
+
+    Impl(const core::Recording& rec_, const core::Recipe& recipe_, const PipelineOptions& o_)
+        : rec(rec_), recipe(recipe_), o(o_) {}
+    void compensate(const core::FaceScan& face);
+    std::optional<Eigen::Isometry3d> find_pose();
+    void add_faces(std::size_t first, std::size_t end);
+};
+
+// One face's compensation into the summaries, the warnings, u and the untrusted runs. What it
+// found is a warning: a feature is degraded only when it relies on the profiles it touched.
+void PartRun::Impl::compensate(const core::FaceScan& face) {
+    const auto t0 = Clock::now();
+    auto fc = compensate::compensate_face(face, o.compensation);
+    r.compensation.push_back({fc.face, fc.applied, fc.degraded, fc.reasons, fc.n_degraded,
+                              fc.peak_mm, fc.rms_mm, fc.rate_hz, fc.untrusted});
+    for (const auto& why : fc.reasons) r.warnings.push_back(face.name + ": compensation: " + why);
+    if (fc.applied) u.insert_or_assign(face.name, std::move(fc.u_mm));
+    if (!fc.untrusted.empty()) untrusted.insert_or_assign(face.name, std::move(fc.untrusted));
+    compensate_ms += ms_since(t0);
+}
+
+// The pose: given, or found with every face's displacement as known at the last profile (the
+// last face's from its record up to that profile).
+std::optional<Eigen::Isometry3d> PartRun::Impl::find_pose() {
+    if (o.T_world_part) {
         r.pose_source = o.pose_source;
-    } else {
-        const auto t0 = Clock::now();
-        std::optional<match::Model> built;
-        const match::Model* model = o.model;
-        if (!model) {
-            match::ModelConfig mc;
-            mc.sampling_mm = recipe.matching.sampling_mm;
-            auto m = match::model_from_recipe(recipe, mc);
-            if (!m) {
-                r.measurement =
-                    measure::unmeasured(recipe, rec, "no part model: " + m.error().message);
-                return r;
-            }
-            built = std::move(*m);
-            model = &*built;
-        }
-        match::MatchConfig cfg = o.match;
-        cfg.min_score = recipe.matching.min_score;
-        // The hot part is larger than the cold model: scale it when the temperature is known,
-        // let ICP estimate the scale when it is not.
-        if (rec.temperature_c) cfg.scale = recipe.material.growth(*rec.temperature_c);
-        // Every profile, the untrusted ones too: their bridged displacement is noisy, not biased,
-        // while leaving a band of a face out tilts the nominal model towards the other surfaces
-        // (measured: a side height 0.030 mm off instead of 0.011, docs/compensation.md).
-        r.match = match::match(*model, rec, u, cfg);
-        r.stage_ms.emplace_back("match", ms_since(t0));
-        if (!r.match->found) {
-            r.measurement = measure::unmeasured(recipe, rec, r.match->reason);
-            return r;
-        }
-        T_world_part = r.match->T_world_part;
-        r.pose_source = "match";
+        return o.T_world_part;
     }
-    const auto t1 = Clock::now();
-    r.measurement = measure::measure_part(recipe, rec, *T_world_part, u, o.measure, untrusted);
-    r.stage_ms.emplace_back("measure", ms_since(t1));
-    for (const auto& f : r.measurement.features)
-        if (f.degraded) {
-            r.degraded = true;
-            r.degraded_reasons.push_back(f.name + ": " + f.reason);
+    const auto t0 = Clock::now();
+    measure::FaceDisplacements u_now = u;
+    if (o.compensate && !rec.faces.empty()) {
+        auto fc = compensate::compensate_face(
+            record_until_last_profile(rec.faces.back(), o.compensation.clock_offset_s),
+            o.compensation);
+        if (fc.applied) u_now.insert_or_assign(rec.faces.back().name, std::move(fc.u_mm));
+    }
+    std::optional<match::Model> built;
+    const match::Model* model = o.model;
+    if (!model) {
+        match::ModelConfig mc;
+        mc.sampling_mm = recipe.matching.sampling_mm;
+        auto m = match::model_from_recipe(recipe, mc);
+        if (!m) {
+            r.measurement = measure::unmeasured(recipe, rec, "no part model: " + m.error().message);
+            return std::nullopt;
         }
-    return r;
+        built = std::move(*m);
+        model = &*built;
+    }
+    match::MatchConfig cfg = o.match;
+    cfg.min_score = recipe.matching.min_score;
+    // The hot part is larger than the cold model: scale it when the temperature is known, let
+    // ICP estimate the scale when it is not.
+    if (rec.temperature_c) cfg.scale = recipe.material.growth(*rec.temperature_c);
+    // Every profile, the untrusted ones too: their bridged displacement is noisy, not biased,
+    // while leaving a band of a face out tilts the nominal model towards the other surfaces
+    // (measured: a side height 0.030 mm off instead of 0.011, docs/compensation.md).
+    r.match = match::match(*model, rec, u_now, cfg);
+    r.stage_ms.emplace_back("match", ms_since(t0));
+    if (!r.match->found) {
+        r.measurement = measure::unmeasured(recipe, rec, r.match->reason);
+        return std::nullopt;
+    }
+    r.pose_source = "match";
+    return r.match->T_world_part;
+}
+
+void PartRun::Impl::add_faces(std::size_t first, std::size_t end) {
+    const auto t0 = Clock::now();
+    std::vector<measure::PartMeasurer::FaceData> faces;
+    for (std::size_t i = first; i < end; ++i) {
+        const auto& face = rec.faces[i];
+        auto it = u.find(face.name);
+        auto un = untrusted.find(face.name);
+        faces.push_back({&face, it == u.end() ? nullptr : &it->second,
+                         un == untrusted.end() ? nullptr : &un->second});
+    }
+    measurer->add_faces(faces);
+    faces_added = end;
+    measure_ms += ms_since(t0);
+}
+
+PartRun::PartRun(const core::Recording& rec, const core::Recipe& recipe, const PipelineOptions& o)
+    : impl_(std::make_unique<Impl>(rec, recipe, o)) {
+    Impl& m = *impl_;
+    m.r.part_id = rec.part_id;
+    m.r.recipe = recipe.name;
+    m.r.captured_at = rec.captured_at;
+    m.r.warnings = rec.warnings;
+    if (rec.recipe != recipe.name)
+        m.r.warnings.push_back("recording names recipe '" + rec.recipe + "', measured with '" +
+                               recipe.name + "'");
+    m.r.compensated = o.compensate;
+    const std::size_t n = rec.faces.size();
+    if (o.compensate)
+        for (std::size_t i = 0; i + 1 < n; ++i) m.compensate(rec.faces[i]);
+    const auto T_world_part = m.find_pose();
+    if (T_world_part) m.measurer.emplace(recipe, rec, *T_world_part, o.measure);
+}
+
+void PartRun::measure_all_but_last() {
+    Impl& m = *impl_;
+    if (m.measurer && m.faces_added == 0 && m.rec.faces.size() > 1)
+        m.add_faces(0, m.rec.faces.size() - 1);
+}
+
+PartRun::~PartRun() = default;
+
+PartResult PartRun::finish() {
+    Impl& m = *impl_;
+    const std::size_t n = m.rec.faces.size();
+    if (m.o.compensate && n > 0) m.compensate(m.rec.faces.back());
+    for (const auto& f : m.rec.faces) m.r.faces.push_back(summarize(f));
+    if (m.o.compensate) m.r.stage_ms.emplace(m.r.stage_ms.begin(), "compensate", m.compensate_ms);
+    if (!m.measurer) return std::move(m.r);
+    if (n > m.faces_added) m.add_faces(m.faces_added, n);
+    const auto t0 = Clock::now();
+    m.r.measurement = m.measurer->finish();
+    m.measure_ms += ms_since(t0);
+    m.r.stage_ms.emplace_back("measure", m.measure_ms);
+    for (const auto& f : m.r.measurement.features)
+        if (f.degraded) {
+            m.r.degraded = true;
+            m.r.degraded_reasons.push_back(f.name + ": " + f.reason);
+        }
+    return std::move(m.r);
+}
+
+PartResult run(const core::Recording& rec, const core::Recipe& recipe, const PipelineOptions& o) {
+    return PartRun(rec, recipe, o).finish();
 }
 
 std::string to_json(const PartResult& r) {

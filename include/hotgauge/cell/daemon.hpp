@@ -64,8 +64,9 @@ struct PartTiming {
     std::uint64_t sequence = 0;
     std::int64_t last_profile_ns = 0;  // camera time of the last profile of the last face
     std::int64_t published_ns = 0;     // the result was valid in the registers (or the fault)
-    double accel_wait_ms = 0;          // waiting for the accelerometer's margin after the scan
-    double pipeline_ms = 0, store_ms = 0;
+    double accel_wait_ms = 0;          // scans done -> the accelerometer's margin arrived
+    double pipeline_ms = 0;            // the pipeline's work after the margin
+    double store_ms = 0;
 };
 
 struct DaemonStats {

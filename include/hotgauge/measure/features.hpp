@@ -3,6 +3,7 @@
 // features measured in the part frame (docs/measurement.md).
 #include <Eigen/Geometry>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <utility>
@@ -115,6 +116,34 @@ PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& 
 }  // namespace hotgauge::measure
 
 namespace hotgauge::measure {
+
+// measure_part in stages, for a cell that wants its answer soon after the last profile: faces are
+// added as they become final, and each feature is measured as soon as every face it uses is in.
+// The same numbers as measure_part on the same inputs, whatever the grouping. `rec`, and the
+// scans, displacements and runs given to add_faces, must outlive the measurer.
+class PartMeasurer {
+  public:
+    PartMeasurer(const core::Recipe& recipe, const core::Recording& rec,
+                 const Eigen::Isometry3d& T_world_part, const MeasureConfig& config = {});
+    ~PartMeasurer();
+    PartMeasurer(const PartMeasurer&) = delete;
+    PartMeasurer& operator=(const PartMeasurer&) = delete;
+
+    struct FaceData {
+        const core::FaceScan* scan = nullptr;             // a face of `rec`
+        const std::vector<Eigen::Vector3d>* u = nullptr;  // its displacement, or none
+        const std::vector<core::UntrustedProfiles>* untrusted = nullptr;  // or none
+    };
+    // Prepares the faces (over the cores), then measures the features they complete.
+    void add_faces(const std::vector<FaceData>& faces);
+    // The features of faces never added are not measured (naming the face); cold values and
+    // verdicts for all.
+    PartMeasurement finish();
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
 
 // Every feature of `recipe` reported as not measured with `reason` (no pose, no data, ...).
 PartMeasurement unmeasured(const core::Recipe& recipe, const core::Recording& rec,

@@ -2,6 +2,7 @@
 // The one pipeline function the offline tool and the daemon share: recording in, part result out
 // (docs/architecture.md). Stages: [compensation] → pose → measurement → thermal scaling.
 #include <Eigen/Geometry>
+#include <memory>
 #include <optional>
 #include <string>
 #include <utility>
@@ -67,6 +68,29 @@ struct PartResult {
 
 PartResult run(const core::Recording& rec, const core::Recipe& recipe,
                const PipelineOptions& options);
+
+// run() in steps, so that a cell has its answer soon after the last profile (docs/architecture.md
+// "Latency"). The constructor and measure_all_but_last() need of the last face's accelerometer
+// record only what precedes its last profile: the constructor compensates the other faces and
+// finds the pose with the last face's record up to its last profile (measured to change no
+// feature by more than 2.1 µm, docs/benchmarks.md "Daemon latency"); measure_all_but_last()
+// measures every feature the other faces complete. finish() compensates the last face with its
+// whole record and measures the rest. run() is the constructor and finish(); the numbers do not
+// depend on whether measure_all_but_last() ran. `rec` and `recipe` must outlive the run; between
+// the calls only the last face's accelerometer record may change (grow).
+class PartRun {
+  public:
+    PartRun(const core::Recording& rec, const core::Recipe& recipe, const PipelineOptions& options);
+    ~PartRun();
+    PartRun(const PartRun&) = delete;
+    PartRun& operator=(const PartRun&) = delete;
+    void measure_all_but_last();
+    PartResult finish();  // once
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
 
 // The stable machine interface (docs/measure-output.md): one JSON object.
 std::string to_json(const PartResult& result);
