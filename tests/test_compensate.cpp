@@ -11,6 +11,7 @@
 #include "hotgauge/compensate/compensate.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/pipeline/pipeline.hpp"
+#include "hotgauge/pipeline/verify.hpp"
 #include "hotgauge/sim/simulator.hpp"
 
 using namespace hotgauge;
@@ -638,4 +639,35 @@ TEST(PartRun, InStepsWithAGrowingRecordIsExactlyRun) {
         EXPECT_EQ(a.u_mm, b.u_mm) << a.name;
     }
     EXPECT_EQ(steps.warnings, whole.warnings);
+}
+
+// A master whose certified features could only be measured degraded is not checked on them:
+// the check fails as inconclusive (the PLC reads degraded, not NOK), naming why.
+TEST(CompensateBadInput, AMasterMeasuredDegradedIsInconclusive) {
+    auto s = simulate(env().cell, 17);
+    const auto trusted_run = run_pipeline(s);
+    core::MasterCertificate cert;
+    cert.master = "M-1";
+    cert.recipe = env().recipe.name;
+    cert.tolerance_mm = 1.0;  // generous: only the data's trust can fail it
+    for (std::size_t j = 0; j < s.truth.features.size(); ++j)  // what the quick cell measures
+        if (trusted_run.measurement.features[j].cold_mm)
+            cert.features.push_back(
+                {s.truth.features[j].name, s.truth.features[j].cold_mm, 0.001, {}});
+    ASSERT_GE(cert.features.size(), 8u);
+    const auto trusted = pipeline::verify(trusted_run, cert);
+    ASSERT_TRUE(trusted);
+    EXPECT_TRUE(trusted->passed);
+    for (auto& f : s.recording.faces) {
+        f.accel_mps2.clear();
+        f.accel_times_ns.clear();
+    }
+    const auto v = pipeline::verify(run_pipeline(s), cert);
+    ASSERT_TRUE(v);
+    EXPECT_FALSE(v->passed);
+    EXPECT_TRUE(v->inconclusive);
+    for (const auto& f : v->features) {
+        EXPECT_TRUE(f.degraded) << f.name;
+        EXPECT_NE(f.reason.find("degraded"), std::string::npos) << f.reason;
+    }
 }

@@ -359,7 +359,7 @@ pyrometer:
 results:
   dir: {self.results_dir}
   archive_dir: {self.archive_dir}
-  archive_quota_gb: 1
+  archive_quota_gb: 4
   archive_every_nth_ok: {self.archive_every_nth_ok}
 {self.config_extra}"""
         with open(self.config_path, "w") as f:

@@ -103,7 +103,16 @@ plc::PartResult to_plc(const pipeline::PartResult& r, const pipeline::Verificati
         out.features.push_back(v);
     }
     out.overall = plc::overall_verdict(out.features, r.degraded);
-    if (check) out.overall = check->passed ? plc::Verdict::kOk : plc::Verdict::kNok;
+    // A master: the check's verdict; inconclusive (failed only on degraded features) reads
+    // degraded; a passed check over slots not all OK reads as the slots do.
+    if (check && !check->passed)
+        out.overall = check->inconclusive ? plc::Verdict::kDegraded : plc::Verdict::kNok;
+    else if (check && out.overall != plc::Verdict::kNok)
+        out.overall =
+            std::all_of(out.features.begin(), out.features.end(),
+                        [](const plc::FeatureValue& v) { return v.verdict == plc::Verdict::kOk; })
+                ? plc::Verdict::kOk
+                : out.overall;
     return out;
 }
 
@@ -296,7 +305,7 @@ struct Daemon::Impl {
                                      core::Recording& rec);
     void read_part_temperature(Captured& c) const;
     void attach_accelerometer(Captured& c, double margin_s) const;
-    void complete_last_face(Captured& c) const;
+    void refresh_last_face(Captured& c, std::int64_t until_ns, double timeout_s) const;
     void prepare_acquisition(const std::shared_ptr<const Setup>& s);
     void await_accel_history(double margin_s) const;
     void processing_loop();
@@ -598,14 +607,12 @@ void Daemon::Impl::attach_accelerometer(Captured& c, double margin_s) const {
     for (auto& f : c.rec.faces) copy_window(*ring, f, static_cast<std::int64_t>(margin_s * 1e9));
 }
 
-// The last face's record once the margin past its last profile has arrived (bounded wait): the
-// compensation of its last profiles needs it (docs/compensation.md).
-void Daemon::Impl::complete_last_face(Captured& c) const {
-    const auto margin_ns = static_cast<std::int64_t>(c.margin_s * 1e9);
-    ring->wait_for(c.last_profile_ns + margin_ns,
-                   milliseconds(static_cast<long long>(500 + 1000 * c.margin_s)));
-    c.accel_wait_ms = ms_between(c.scanned, Clock::now());
-    copy_window(*ring, c.rec.faces.back(), margin_ns);
+// The last face's record once it reaches `until_ns` (a bounded wait), copied again: up to its
+// last profile for the pose, as the offline tool has it; then up to the margin past it, which
+// the compensation of its last profiles needs (docs/compensation.md).
+void Daemon::Impl::refresh_last_face(Captured& c, std::int64_t until_ns, double timeout_s) const {
+    ring->wait_for(until_ns, milliseconds(static_cast<long long>(1000 * timeout_s)));
+    copy_window(*ring, c.rec.faces.back(), static_cast<std::int64_t>(c.margin_s * 1e9));
 }
 
 // ---- processing ----------------------------------------------------------------------------
@@ -661,13 +668,21 @@ pipeline::PartResult Daemon::Impl::measure_captured(Captured& c) const {
     }
     pipeline::PipelineOptions opt;
     opt.model = job.setup->models.at(job.trigger.recipe_slot).get();
-    opt.compensate = true;
+    // No accelerometer configured (source: none): nothing to compensate with, as with
+    // `hotgauge measure --no-compensation` (a warning, not every feature degraded).
+    opt.compensate = accel != nullptr;
+    if (accel) refresh_last_face(c, c.last_profile_ns + ring->period_ns(), 0.2);
     pipeline::PartRun run(c.rec, *job.recipe, opt);
     run.measure_all_but_last();
-    if (accel) complete_last_face(c);
+    if (accel) {
+        refresh_last_face(c, c.last_profile_ns + static_cast<std::int64_t>(c.margin_s * 1e9),
+                          0.5 + c.margin_s);
+        c.accel_wait_ms = ms_between(c.scanned, Clock::now());
+    }
     const auto t0 = Clock::now();
     r = run.finish();
     c.after_margin_ms = ms_between(t0, Clock::now());
+    if (!accel) r.warnings.push_back("no accelerometer configured: vibration not compensated");
     for (const auto& why : c.degraded) {
         r.degraded = true;
         r.degraded_reasons.push_back(why);
@@ -721,8 +736,9 @@ void Daemon::Impl::process(Captured c) {
     if (is_master && !c.fault) {
         if (auto v = pipeline::verify(r, master->second)) {
             verification = std::move(*v);
-            r.measurement.verdict =
-                verification->passed ? measure::Verdict::kOk : measure::Verdict::kNok;
+            r.measurement.verdict = verification->passed         ? measure::Verdict::kOk
+                                    : verification->inconclusive ? measure::Verdict::kDegraded
+                                                                 : measure::Verdict::kNok;
         } else {
             r.warnings.push_back("master check: " + v.error().message);
             r.measurement.verdict = measure::Verdict::kNotMeasured;

@@ -93,7 +93,10 @@ std::array<std::vector<double>, 3> integrate_across_gaps(
     std::array<std::vector<double>, 3> u;
     for (int k = 0; k < 3; ++k) u[k] = integrate_twice(accel[k], rate_hz, c);
     const auto n = static_cast<Eigen::Index>(accel[0].size());
-    if (gaps.empty() || n == 0) return u;
+    // Each gap costs two integrations and the solve grows with their square: a record this
+    // broken keeps its straight lines (its profiles are untrusted around every gap anyway).
+    constexpr std::size_t kMaxBridgedGaps = 256;
+    if (gaps.empty() || n == 0 || gaps.size() > kMaxBridgedGaps) return u;
     const auto m = static_cast<Eigen::Index>(2 * gaps.size());
     Eigen::MatrixXd B(n, m);
     for (std::size_t g = 0; g < gaps.size(); ++g) {
@@ -304,7 +307,14 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
     const double t0 = smp.t.front(), t1 = smp.t.back();
     const auto grid = to_grid(smp, face.T_world_camera.linear() * face.R_camera_accel, period);
     std::vector<GridGap> grid_gaps;
+    const auto n_grid = grid[0].size();
     for (const Trouble& b : trouble) {
+        if (b.t1 <= b.t0) {  // a lone bad sample: the grid point it left to the straight line
+            const long long i = std::llround((b.t0 - t0) / period);
+            if (i > 0 && i + 1 < static_cast<long long>(n_grid))
+                grid_gaps.push_back({static_cast<std::size_t>(i), static_cast<std::size_t>(i)});
+            continue;
+        }
         const auto g0 = static_cast<std::size_t>(std::floor((b.t0 - t0) / period)) + 1;
         const auto g1 = static_cast<std::size_t>(std::ceil((b.t1 - t0) / period)) - 1;
         if (b.t1 > b.t0 && g1 >= g0) grid_gaps.push_back({g0, g1});

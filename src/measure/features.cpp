@@ -222,9 +222,14 @@ FeatureResult PartMeasurer::Impl::measure_feature(const FeatureSpec& f) const {
     if (r.left_out.empty()) return r;
     FeatureResult again = skeleton(f);
     measure_one(ctx, refs(f, true), f, again);
-    const bool thin =
-        r.hot_mm && again.hot_mm &&
-        static_cast<double>(r.n_points) < kMinTrustedShare * static_cast<double>(again.n_points);
+    // Per end too: a height's one small end may lose most of its points to them.
+    const auto few = [](std::int64_t left, std::int64_t all) {
+        return static_cast<double>(left) < kMinTrustedShare * static_cast<double>(all);
+    };
+    bool thin = r.hot_mm && again.hot_mm && few(r.n_points, again.n_points);
+    if (r.hot_mm && again.hot_mm && r.ends.size() == again.ends.size())
+        for (std::size_t j = 0; j < r.ends.size(); ++j)
+            thin = thin || few(r.ends[j].n_points, again.ends[j].n_points);
     if (r.hot_mm && !thin) return r;  // measured around them
     again.left_out = std::move(r.left_out);
     again.degraded = again.hot_mm.has_value();

@@ -244,7 +244,7 @@ PartResult PartRun::finish() {
     m.measure_ms += ms_since(t0);
     m.r.stage_ms.emplace_back("measure", m.measure_ms);
     for (const auto& f : m.r.measurement.features)
-        if (f.degraded) {
+        if (f.verdict == measure::Verdict::kDegraded) {
             m.r.degraded = true;
             m.r.degraded_reasons.push_back(f.name + ": " + f.reason);
         }
@@ -365,7 +365,8 @@ std::string to_table(const PartResult& r) {
     std::snprintf(line, sizeof line, "part %s  recipe %s  temperature %s  pose %s  verdict %s%s\n",
                   r.part_id.c_str(), r.recipe.c_str(), temperature,
                   r.pose_source.empty() ? "none" : r.pose_source.c_str(),
-                  measure::to_string(m.verdict), r.degraded ? " (DEGRADED)" : "");
+                  measure::to_string(m.verdict),
+                  r.degraded && m.verdict != measure::Verdict::kDegraded ? " (DEGRADED)" : "");
     s += line;
     if (r.match) {
         const auto& mr = *r.match;

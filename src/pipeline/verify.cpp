@@ -1,5 +1,6 @@
 #include "hotgauge/pipeline/verify.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
@@ -32,7 +33,11 @@ core::Result<Verification> verify(const PartResult& r, const core::MasterCertifi
         } else {
             fv.deviation_mm = *m->cold_mm - cf.value_mm;
             fv.passed = std::abs(*fv.deviation_mm) <= fv.tolerance_mm;
-            if (!fv.passed) {
+            fv.degraded = m->degraded;
+            if (fv.degraded) {
+                fv.passed = false;
+                fv.reason = m->reason;  // "degraded: measured with untrusted profiles; ..."
+            } else if (!fv.passed) {
                 char buf[96];
                 std::snprintf(buf, sizeof buf, "deviation %+.4f mm outside ±%.4f mm",
                               *fv.deviation_mm, fv.tolerance_mm);
@@ -42,6 +47,10 @@ core::Result<Verification> verify(const PartResult& r, const core::MasterCertifi
         v.passed = v.passed && fv.passed;
         v.features.push_back(std::move(fv));
     }
+    v.inconclusive = !v.passed && std::all_of(v.features.begin(), v.features.end(),
+                                              [](const FeatureVerification& f) {
+                                                  return f.passed || f.degraded;
+                                              });
     return v;
 }
 
@@ -50,6 +59,7 @@ std::string to_json(const Verification& v) {
     j["master"] = v.master;
     j["certified_at"] = v.certified_at;
     j["passed"] = v.passed;
+    j["inconclusive"] = v.inconclusive;
     j["features"] = nlohmann::ordered_json::array();
     for (const auto& f : v.features) {
         nlohmann::ordered_json o;
@@ -60,6 +70,7 @@ std::string to_json(const Verification& v) {
         o["measured_mm"] = f.measured_mm ? nlohmann::ordered_json(*f.measured_mm) : nullptr;
         o["deviation_mm"] = f.deviation_mm ? nlohmann::ordered_json(*f.deviation_mm) : nullptr;
         o["passed"] = f.passed;
+        o["degraded"] = f.degraded;
         o["reason"] = f.reason;
         j["features"].push_back(o);
     }

@@ -65,6 +65,9 @@ core::Result<RawArchive> RawArchive::open(const ArchiveConfig& config) {
 
 bool RawArchive::wants(const pipeline::PartResult& r, std::uint64_t sequence) const {
     if (r.measurement.verdict != measure::Verdict::kOk || r.degraded) return true;
+    // Measured around untrusted profiles: the evidence that the gap bridging held.
+    for (const auto& c : r.compensation)
+        if (c.n_degraded > 0) return true;
     return config_.every_nth_ok > 0 &&
            sequence % static_cast<std::uint64_t>(config_.every_nth_ok) == 0;
 }

@@ -17,12 +17,16 @@ struct FeatureVerification {
     std::optional<double> measured_mm;   // cold; absent = not measured
     std::optional<double> deviation_mm;  // measured − certified
     bool passed = false;
-    std::string reason;  // why it failed
+    bool degraded = false;  // measured only with untrusted profiles: not checked, fails
+    std::string reason;     // why it failed
 };
 
 struct Verification {
     std::string master, certified_at;
-    bool passed = false;  // every certified feature measured and within its tolerance
+    bool passed = false;  // every certified feature measured, trusted and within its tolerance
+    // Failed only because certified features were degraded: the check could not be made on
+    // trusted data (the PLC reads degraded, not NOK).
+    bool inconclusive = false;
     std::vector<FeatureVerification> features;  // in certificate order
 };
 

@@ -64,8 +64,8 @@ enum class State : std::uint16_t { kIdle = 1, kBusy = 2, kDone = 3, kFault = 4 }
 enum class Command : std::uint16_t { kNone = 0, kTrigger = 1, kAck = 2, kReset = 3 };
 // Per feature: kNone (no result), kOk, kNok, kNotMeasured, kDegraded (measured only with
 // profiles the compensation could not follow: the value is given, it sorts nothing). Overall:
-// NOK when a feature is NOK, else not measured, else degraded when a feature is or the cell
-// found the data wanting (part temperature unknown), else OK.
+// NOK when a feature is NOK, else not measured, else degraded when a feature is (or the cell
+// flagged the data), else OK.
 enum class Verdict : std::uint16_t {
     kNone = 0,
     kOk = 1,
