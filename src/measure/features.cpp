@@ -241,26 +241,30 @@ PartMeasurer::PartMeasurer(const core::Recipe& recipe, const core::Recording& re
     : impl_(std::make_unique<Impl>(recipe, rec, T_world_part, config)) {}
 PartMeasurer::~PartMeasurer() = default;
 
-void PartMeasurer::add_faces(const std::vector<FaceData>& faces) {
+void PartMeasurer::add_faces(std::size_t first, std::size_t end, const FaceDisplacements& u,
+                             const FaceUntrusted& untrusted) {
     Impl& m = *impl_;
+    const auto find = [](const auto& map, const std::string& name) {
+        auto it = map.find(name);
+        return it == map.end() ? nullptr : &it->second;
+    };
     // Faces are independent: prepared over the cores, with and without their untrusted runs.
     std::vector<std::pair<std::size_t, bool>> jobs;
-    for (std::size_t i = 0; i < faces.size(); ++i) {
+    for (std::size_t i = first; i < end && i < m.rec.faces.size(); ++i) {
         jobs.emplace_back(i, false);
-        if (faces[i].untrusted && !faces[i].untrusted->empty()) jobs.emplace_back(i, true);
+        if (find(untrusted, m.rec.faces[i].name)) jobs.emplace_back(i, true);
     }
     std::vector<detail::FaceFrame> prepared(jobs.size());
     core::parallel_for(jobs.size(), m.ctx.c.threads, [&](std::size_t j, unsigned) {
-        const FaceData& f = faces[jobs[j].first];
-        prepared[j] =
-            detail::make_frame(*f.scan, m.T_part_world, f.u, jobs[j].second ? nullptr : f.untrusted,
-                               m.bounds.r_max, m.bounds.z_lo, m.bounds.z_hi);
+        const core::FaceScan& f = m.rec.faces[jobs[j].first];
+        prepared[j] = detail::make_frame(f, m.T_part_world, find(u, f.name),
+                                         jobs[j].second ? nullptr : find(untrusted, f.name),
+                                         m.bounds.r_max, m.bounds.z_lo, m.bounds.z_hi);
     });
     for (std::size_t j = 0; j < jobs.size(); ++j) {
-        const FaceData& f = faces[jobs[j].first];
-        (jobs[j].second ? m.frames_all : m.frames)
-            .insert_or_assign(f.scan->name, std::move(prepared[j]));
-        if (jobs[j].second) m.untrusted[f.scan->name] = *f.untrusted;
+        const std::string& name = m.rec.faces[jobs[j].first].name;
+        (jobs[j].second ? m.frames_all : m.frames).insert_or_assign(name, std::move(prepared[j]));
+        if (jobs[j].second) m.untrusted[name] = *find(untrusted, name);
     }
     // Every feature whose faces are all in: independent of each other, over the cores.
     std::vector<std::size_t> ready;
@@ -291,14 +295,7 @@ PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& 
                              const Eigen::Isometry3d& T_world_part, const FaceDisplacements& u,
                              const MeasureConfig& config, const FaceUntrusted& untrusted) {
     PartMeasurer m(recipe, rec, T_world_part, config);
-    std::vector<PartMeasurer::FaceData> faces;
-    for (const auto& face : rec.faces) {
-        auto it = u.find(face.name);
-        auto un = untrusted.find(face.name);
-        faces.push_back({&face, it == u.end() ? nullptr : &it->second,
-                         un == untrusted.end() ? nullptr : &un->second});
-    }
-    m.add_faces(faces);
+    m.add_faces(0, rec.faces.size(), u, untrusted);
     return m.finish();
 }
 

@@ -192,15 +192,7 @@ std::optional<Eigen::Isometry3d> PartRun::Impl::find_pose() {
 
 void PartRun::Impl::add_faces(std::size_t first, std::size_t end) {
     const auto t0 = Clock::now();
-    std::vector<measure::PartMeasurer::FaceData> faces;
-    for (std::size_t i = first; i < end; ++i) {
-        const auto& face = rec.faces[i];
-        auto it = u.find(face.name);
-        auto un = untrusted.find(face.name);
-        faces.push_back({&face, it == u.end() ? nullptr : &it->second,
-                         un == untrusted.end() ? nullptr : &un->second});
-    }
-    measurer->add_faces(faces);
+    measurer->add_faces(first, end, u, untrusted);
     faces_added = end;
     measure_ms += ms_since(t0);
 }

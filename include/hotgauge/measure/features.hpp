@@ -129,13 +129,11 @@ class PartMeasurer {
     PartMeasurer(const PartMeasurer&) = delete;
     PartMeasurer& operator=(const PartMeasurer&) = delete;
 
-    struct FaceData {
-        const core::FaceScan* scan = nullptr;             // a face of `rec`
-        const std::vector<Eigen::Vector3d>* u = nullptr;  // its displacement, or none
-        const std::vector<core::UntrustedProfiles>* untrusted = nullptr;  // or none
-    };
-    // Prepares the faces (over the cores), then measures the features they complete.
-    void add_faces(const std::vector<FaceData>& faces);
+    // Prepares faces [first, end) of `rec` (over the cores) with their displacement and
+    // untrusted runs from `u` and `untrusted` (a face absent there: none), then measures the
+    // features they complete.
+    void add_faces(std::size_t first, std::size_t end, const FaceDisplacements& u,
+                   const FaceUntrusted& untrusted);
     // The features of faces never added are not measured (naming the face); cold values and
     // verdicts for all.
     PartMeasurement finish();
