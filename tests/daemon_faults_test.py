@@ -9,6 +9,9 @@ One daemon lives through, in turn:
   5. the results directory full (RLIMIT_FSIZE on the daemon): PLC fault 206, nothing half written;
   6. the camera (the whole virtual cell) killed mid-part: PLC fault 203; after it is back, the
      next part is measured;
+  7. hotgauged killed (kill -9) and restarted 1 s later: the camera is taken back once the dead
+     process's control channel expires, the next part is measured, and the PLC's result
+     sequence goes on from the results files;
 and after each, the daemon still runs and no earlier result is lost from the files.
 
     /usr/bin/python3 daemon_faults_test.py BUILD_DIR
@@ -206,6 +209,30 @@ def main():
         p = part()
         assert p["verdict"] == "OK", p
         files_intact()
+
+        step("7. hotgauged killed (kill -9) and restarted 1 s later, as systemd would")
+        # The dead process holds the camera's control channel until its heartbeat expires; the
+        # new one waits for it (camera.control_wait_ms). The PLC's sequence goes on from the
+        # results files (issue 18, findings 3 and 4).
+        last = kept[-1]["sequence"]
+        plc.close()
+        line.daemon.proc.kill()
+        line.daemon.proc.wait()
+        line.procs.remove(line.daemon)
+        line.daemon.log.close()
+        os.rename(line.daemon.log_path, line.daemon.log_path.replace(".log", "-killed.log"))
+        time.sleep(1.0)
+        line.start_daemon()
+        plc = vl.Plc(line.plc_port)
+        r = vl.decode(plc.inputs())
+        print(f"   after the restart: state {r['state']}, sequence {r['sequence']} "
+              f"(files: {last})")
+        assert r["state"] == vl.IDLE and r["sequence"] == last & 0xFFFF, r
+        p = part()
+        assert p["verdict"] == "OK" and p["n_features"] == 13, p
+        files_intact()
+        assert kept[-1]["sequence"] == last + 1, kept[-1]["sequence"]
+        assert p["sequence"] == (last + 1) & 0xFFFF, p
 
         step("SIGTERM")
         plc.close()

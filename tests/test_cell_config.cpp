@@ -126,6 +126,32 @@ TEST(DaemonConfig, GeometryKeysThatMovedToTheCalibrationSaySo) {
         << e;
 }
 
+// Issue 18, finding 2: paths the filesystem cannot even look at made std::filesystem::exists
+// throw through the reader (exit 134, a daemon killed by SIGHUP). They are errors now, naming
+// the file, the line and the reason.
+TEST(DaemonConfig, PathsTheFilesystemRefusesAreErrorsNotExceptions) {
+    test::TempDir dir;
+    const auto loop = dir.path / "loop";
+    std::filesystem::create_symlink(loop, loop);  // a symlink to itself: ELOOP on stat
+    const std::string too_long(300, 'x');         // over NAME_MAX: ENAMETOOLONG
+    const std::string recipe = "1: " + kConfigDir + "/parts/hub-a.yaml";
+    int line = 0;
+    for (const std::string& bad : {loop.string() + "/hub-a.yaml", "/tmp/" + too_long}) {
+        std::string e;
+        EXPECT_NO_THROW(e = error_with(recipe, "1: " + bad, &line)) << bad;
+        EXPECT_NE(e.find(":" + std::to_string(line) + ": recipes: " + bad), std::string::npos) << e;
+        EXPECT_EQ(e.find("does not exist"), std::string::npos) << "the reason, not a guess: " << e;
+    }
+    for (const std::filesystem::path& file :
+         {loop / "hotgauged.yaml", std::filesystem::path("/tmp") / too_long}) {
+        EXPECT_NO_THROW({
+            auto r = cell::read_daemon_config(file);
+            ASSERT_FALSE(r.ok());
+            EXPECT_NE(r.error().message.find(file.string()), std::string::npos);
+        });
+    }
+}
+
 TEST(DaemonConfig, AMissingFileIsNamed) {
     auto c = cell::read_daemon_config("/nonexistent/hotgauged.yaml");
     ASSERT_FALSE(c.ok());

@@ -105,6 +105,7 @@ TEST(Daemon, ACameraThatIsNotThereFailsThePartWithItsReasonAndTheDaemonGoesOn) {
 
     Plc plc((*daemon)->plc_port());
     ASSERT_TRUE(plc.ok());
+    EXPECT_EQ(plc.input(plc::ir::kSequence), 41) << "the PLC's count goes on from the files";
     // No recipe in slot 9: fault 202 at once, and no sequence number is used.
     plc.command(1, 9);
     ASSERT_TRUE(plc.wait_state(plc::State::kFault, 5s));
@@ -141,6 +142,20 @@ TEST(Daemon, ACameraThatIsNotThereFailsThePartWithItsReasonAndTheDaemonGoesOn) {
     while ((*daemon)->stats().rejected_reloads == 0 && std::chrono::steady_clock::now() < until)
         std::this_thread::sleep_for(20ms);
     EXPECT_EQ((*daemon)->stats().rejected_reloads, 1u);
+    // A recipe path the filesystem cannot look at (a symlink loop) made the reader throw and
+    // killed the daemon (issue 18, finding 2): rejected like any other mistake.
+    const auto loop = results / "loop";
+    std::filesystem::create_symlink(loop, loop);
+    std::string looped = config_text(results);
+    const std::string recipe = std::string(HOTGAUGE_SOURCE_DIR) + "/config/parts/hub-a.yaml";
+    looped.replace(looped.find(recipe), recipe.size(), (loop / "hub-a.yaml").string());
+    write(config, looped);
+    (*daemon)->request_reload();
+    const auto until_loop = std::chrono::steady_clock::now() + 5s;
+    while ((*daemon)->stats().rejected_reloads == 1 &&
+           std::chrono::steady_clock::now() < until_loop)
+        std::this_thread::sleep_for(20ms);
+    EXPECT_EQ((*daemon)->stats().rejected_reloads, 2u);
     plc.command(3);
     EXPECT_TRUE(plc.wait_state(plc::State::kIdle, 5s)) << "still serving the PLC";
     write(config, config_text(results));

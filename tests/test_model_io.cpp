@@ -4,12 +4,15 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <sstream>
 #include <string>
@@ -387,6 +390,37 @@ TEST_F(ModelFile, EveryBadFileIsAClearError) {
         with_magic.insert(with_magic.end(), g.begin(), g.end());
         EXPECT_FALSE(error_for(with_magic).empty()) << len;
     }
+}
+
+// A model whose bytes are what a writer wrote (the checksum holds) but whose numbers are not
+// finite made every part "not found" with exit 0 (issue 18, finding 7): refused when read.
+TEST_F(ModelFile, NonFiniteNumbersBehindAGoodChecksumAreRefused) {
+    const Model m = recipe_model();
+    ASSERT_TRUE(write_model(m, path("good.hgm")));
+    const Bytes bytes = read_all(path("good.hgm"));
+    const auto replaced = [&](const void* what, const void* with, std::size_t n) {
+        Bytes b = bytes;
+        const auto* w = static_cast<const unsigned char*>(what);
+        const auto at = std::search(b.begin(), b.end(), w, w + n);
+        EXPECT_NE(at, b.end()) << "pattern not in the file";
+        if (at != b.end()) std::memcpy(&*at, with, n);
+        reseal(b);
+        write_all(path("bad.hgm"), b);
+        return error_of(read_model(path("bad.hgm")));
+    };
+    Eigen::Vector3f point = m.points[m.points.size() / 2];
+    const Eigen::Vector3f original = point;
+    point.y() = std::numeric_limits<float>::quiet_NaN();
+    EXPECT_NE(replaced(original.data(), point.data(), sizeof point)
+                  .find("invalid model: model: a sample point is not finite"),
+              std::string::npos);
+    ASSERT_FALSE(m.profile.empty());
+    const auto& segment = m.profile.front();  // value, lo, hi: three doubles in the file
+    const std::array<double, 3> stored = {segment.value, segment.lo, segment.hi};
+    const std::array<double, 3> infinite = {std::numeric_limits<double>::infinity(), segment.lo,
+                                            segment.hi};
+    const std::string e = replaced(stored.data(), infinite.data(), sizeof stored);
+    EXPECT_NE(e.find("a profile segment is not finite"), std::string::npos) << e;
 }
 
 // Random edits of the body behind a recomputed checksum: whatever the reader makes of them, it

@@ -422,6 +422,26 @@ TEST(Handshake, SequenceCountsDonesAndWraps) {
     EXPECT_EQ(h.sequence(), 1);
 }
 
+// Issue 18, finding 4: after a restart input 5 went 47 -> 1 while the results files went on
+// 47 -> 48. It shows the results files' sequence number of the result (low 16 bits), and
+// before the first DONE the last one the files hold.
+TEST(Handshake, SequenceIsTheResultsFilesNumberAcrossARestart) {
+    Handshake h(WordOrder::kBigEndian, 47);
+    EXPECT_EQ(h.sequence(), 47) << "before the first DONE: the last result's";
+    auto e = h.write(0, trigger_write(1));
+    ASSERT_TRUE(e);
+    PartResult r = derived_result(1, 1);
+    r.sequence = 48;
+    ASSERT_TRUE(h.finish(e->trigger.trigger_id, r));
+    EXPECT_EQ(h.sequence(), 48);
+    ASSERT_FALSE(command(h, u16(Command::kAck)));
+    e = h.write(0, trigger_write(2));  // a cycle that ended in FAULT took 49 in the files
+    ASSERT_TRUE(e);
+    r.sequence = (std::uint64_t{1} << 32) + 65536 + 50;  // only the low 16 bits are shown
+    ASSERT_TRUE(h.finish(e->trigger.trigger_id, r));
+    EXPECT_EQ(h.sequence(), 50);
+}
+
 TEST(Handshake, FaultFromEveryStateClearsResults) {
     for (State s : {State::kIdle, State::kBusy, State::kDone, State::kFault}) {
         Handshake h = in_state(s);
@@ -1021,44 +1041,60 @@ TEST(BadInput, ClientDisconnectingMidRequestAffectsNobody) {
     EXPECT_FALSE(s->wait_event(10ms));
 }
 
-TEST(BadInput, ConnectionFloodBeyondTheLimitIsRefused) {
+// Issue 18, finding 6: eight idle connections locked every new client out for the idle
+// timeout. Now, with every slot taken, a new connection closes one that never sent a request,
+// else the one idle longest: a polling PLC is never the one, and it can always get in.
+TEST(BadInput, ConnectionFloodMakesRoomAndNeverLocksThePlcOut) {
     constexpr int kMax = 4;
     auto s = start(loopback(kMax));
     ASSERT_TRUE(s);
     MbClient m(s->port());
     ASSERT_TRUE(m.connected());
     expect_healthy(m, 1);
-    const int limit_lines = count_lines("connections already (the limit)");
+    const int lines_before = count_lines("connections (the limit): closed");
     std::vector<std::unique_ptr<RawClient>> flood;
     for (int i = 0; i < 40; ++i) flood.push_back(std::make_unique<RawClient>(s->port()));
-    // The server resets all but kMax − 1 of them; the healthy client keeps working meanwhile.
-    ASSERT_TRUE(eventually([&] { return s->stats().refused == 40 - (kMax - 1); }))
-        << s->stats().refused;
+    // Each one past the limit closes the oldest silent one; the PLC, which polls, stays.
+    ASSERT_TRUE(eventually([&] { return s->stats().evicted == 40 - (kMax - 1); }))
+        << s->stats().evicted;
     expect_healthy(m, 5);
-    int refused = 0;
     std::vector<RawClient*> alive;
-    for (auto& r : flood) {
-        if (r->closed_by_server(0ms) || r->closed_by_server(20ms))
-            ++refused;
-        else
-            alive.push_back(r.get());
-    }
-    EXPECT_EQ(refused, 40 - (kMax - 1));
+    for (auto& r : flood)
+        if (!r->closed_by_server(0ms) && !r->closed_by_server(20ms)) alive.push_back(r.get());
     ASSERT_EQ(alive.size(), static_cast<std::size_t>(kMax - 1));
-    for (auto* r : alive) {  // the accepted ones are served
+    EXPECT_EQ(alive.back(), flood.back().get()) << "the newest ones stay";
+    for (auto* r : alive) {  // and are served
         ASSERT_TRUE(r->send(frame(read_pdu(0x04, ir::kMapVersionReg, 1))));
         const auto resp = r->response();
         ASSERT_EQ(resp.size(), 4u);
         EXPECT_EQ(resp[3], kMapVersion);
     }
     EXPECT_EQ(s->stats().clients, kMax);
-    EXPECT_EQ(count_lines("connections already (the limit)") - limit_lines, 1)
-        << "a flood logs one line";
+    EXPECT_EQ(s->stats().refused, 0u);
+    EXPECT_EQ(count_lines("connections (the limit): closed") - lines_before, 1)
+        << "a flood logs one line (at most one per 10 s)";
+
+    // Every slot held by a client that asked once and went quiet (a forgotten HMI, a laptop):
+    // a new PLC connection still gets in, and the one idle longest gives way.
     flood.clear();
-    // Room again once they are gone.
-    EXPECT_TRUE(eventually([&] { return s->stats().clients == 1; }));
-    MbClient late(s->port());
-    expect_healthy(late, 2);
+    ASSERT_TRUE(eventually([&] { return s->stats().clients == 1; }));
+    std::vector<std::unique_ptr<MbClient>> quiet;
+    for (int i = 0; i < kMax - 1; ++i) {
+        quiet.push_back(std::make_unique<MbClient>(s->port()));
+        expect_healthy(*quiet.back(), 1);
+        std::this_thread::sleep_for(5ms);
+    }
+    expect_healthy(m, 1);  // the first PLC polls again: now quiet[0] is idle longest
+    MbClient plc(s->port());
+    expect_healthy(plc, 2);
+    EXPECT_FALSE(quiet[0]->read(0, 1)) << "the one idle longest was closed";
+    expect_healthy(m, 1);
+    expect_healthy(*quiet[1], 1);
+
+    // Twenty quick connect/close cycles, then the PLC reconnects: served at once.
+    for (int i = 0; i < 20; ++i) RawClient(s->port()).close();
+    MbClient after(s->port());
+    expect_healthy(after, 2);
 }
 
 TEST(BadInput, AllowListRefusesOtherAddresses) {

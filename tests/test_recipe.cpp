@@ -1,6 +1,8 @@
 // Recipe reader: hub-a loads; each kind of mistake is an error naming file, line and key.
 #include <gtest/gtest.h>
 
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -86,8 +88,16 @@ TEST(Recipe, MeshFileMustExistAndBePlyOrStl) {
                   .find("expected a .ply or .stl file"),
               std::string::npos);
     EXPECT_NE(error_after("kind: axisymmetric", "kind: axisymmetric\n  mesh_file: nowhere.stl")
-                  .find("nowhere.stl not found"),
+                  .find("nowhere.stl does not exist"),
               std::string::npos);
+    // A name the filesystem refuses to look up (over NAME_MAX) is an error with the reason, not
+    // an exception out of the reader (issue 18, finding 2).
+    const std::string too_long = std::string(300, 'm') + ".stl";
+    std::string e;
+    EXPECT_NO_THROW(
+        e = error_after("kind: axisymmetric", "kind: axisymmetric\n  mesh_file: " + too_long));
+    EXPECT_NE(e.find("geometry.mesh_file: "), std::string::npos) << e;
+    EXPECT_NE(e.find(std::strerror(ENAMETOOLONG)), std::string::npos) << e;
 }
 
 TEST(Recipe, MoreMistakes) {
@@ -105,4 +115,10 @@ TEST(Recipe, MissingFile) {
     ASSERT_FALSE(r);
     EXPECT_NE(r.error().message.find("/nonexistent/recipe.yaml: file not found"),
               std::string::npos);
+    const auto too_long = fs::temp_directory_path() / (std::string(300, 'r') + ".yaml");
+    EXPECT_NO_THROW(r = read_recipe(too_long));
+    ASSERT_FALSE(r);
+    EXPECT_NE(r.error().message.find(too_long.string() + ": " + std::strerror(ENAMETOOLONG)),
+              std::string::npos)
+        << r.error().message;
 }

@@ -1,6 +1,7 @@
 // Recording format v1: bit-exact round trips, interoperability with NumPy and the independent
 // validator (/work/shared/tools/validate-recording), and one test per contract violation.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -179,6 +180,26 @@ TEST(RecordingIo, RoundTripIsBitExact) {
     ASSERT_EQ(back->warnings.size(), 1u);
     EXPECT_TRUE(contains(back->warnings[0], "side1")) << back->warnings[0];
     EXPECT_TRUE(contains(back->warnings[0], "no accelerometer samples")) << back->warnings[0];
+}
+
+// Issue 18, finding 7: ±Inf in profiles.npy was counted as a point. A point is two finite
+// numbers: an infinite value reads as NaN, the format's "no point".
+TEST(RecordingIo, InfiniteProfileValuesAreNoPoints) {
+    TempDir tmp;
+    Recording rec = make_recording();
+    auto& p = rec.faces[0].profiles_mm;
+    std::vector<std::size_t> finite;
+    for (std::size_t i = 0; i < p.size() && finite.size() < 3; ++i)
+        if (std::isfinite(p[i])) finite.push_back(i);
+    ASSERT_EQ(finite.size(), 3u);
+    p[finite[0]] = std::numeric_limits<float>::infinity();
+    p[finite[1]] = -std::numeric_limits<float>::infinity();
+    ASSERT_TRUE(write_recording(rec, tmp.path / "part").ok());
+    auto back = read_recording(tmp.path / "part");
+    ASSERT_TRUE(back.ok()) << back.error().message;
+    const auto& q = back->faces[0].profiles_mm;
+    EXPECT_TRUE(std::isnan(q[finite[0]]) && std::isnan(q[finite[1]]));
+    EXPECT_EQ(q[finite[2]], p[finite[2]]);
 }
 
 TEST(RecordingIo, RoundTripWithoutTemperatureAndOverwrite) {
@@ -451,6 +472,28 @@ TEST_F(BadRecording, AccelCountsDisagree) {
     const std::vector<std::int64_t> t = {1, 2, 3};
     ASSERT_TRUE(write_npy(top("accel_times.npy"), "<i8", {3}, t.data(), 24).ok());
     expect_error(top("accel_times.npy"), {"3 entries, expected"});
+}
+
+// Issue 18, finding 5: an inconsistent face was read whole (a 2 GiB profiles.npy: 10 s, 2 GB)
+// before the cheap count check failed. The headers are checked first now: a 4 GiB profiles.npy
+// (sparse here, so it costs no disk) next to 6 profile times is refused without reading it.
+TEST_F(BadRecording, AHugeInconsistentFaceIsRefusedBeforeItsDataIsRead) {
+    std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (16777216, 32, 2), }";
+    header.append(64 - (10 + header.size() + 1) % 64, ' ');
+    header += '\n';
+    std::string prelude = "\x93NUMPY\x01";
+    prelude += '\0';
+    prelude += static_cast<char>(header.size() & 0xFF);
+    prelude += static_cast<char>(header.size() >> 8);
+    dump(top("profiles.npy"), prelude + header);
+    const std::uintmax_t data = std::uintmax_t{16777216} * 32 * 2 * 4;
+    fs::resize_file(top("profiles.npy"), prelude.size() + header.size() + data);
+    struct rusage before {
+    }, after{};
+    ::getrusage(RUSAGE_SELF, &before);
+    expect_error(top("profile_times.npy"), {"6 entries, expected 16777216"});
+    ::getrusage(RUSAGE_SELF, &after);
+    EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 256 * 1024) << "kB: the data was read";
 }
 
 TEST_F(BadRecording, TruncatedNpy) {

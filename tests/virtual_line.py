@@ -374,7 +374,13 @@ results:
 
     def start_daemon(self):
         # As under systemd: notifications to our socket, a 2 s watchdog (pings every second).
-        self.notify = NotifySocket(os.path.join(self.workdir, "notify"))
+        path = os.path.join(self.workdir, "notify")
+        if getattr(self, "notify", None):  # a restart: a new socket at the same path
+            self.notify.stop = True
+            self.notify.thread.join()
+            self.notify.sock.close()
+            os.unlink(path)
+        self.notify = NotifySocket(path)
         env = {"NOTIFY_SOCKET": self.notify.path, "WATCHDOG_USEC": str(WATCHDOG_S * 1_000_000)}
         self.daemon = Process("hotgauged", [os.path.join(self.bin_dir, "src/daemon/hotgauged"),
                                             "--config", self.config_path], self.workdir, env)

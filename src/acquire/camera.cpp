@@ -7,6 +7,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstring>
+#include <thread>
 
 #include "hotgauge/core/clock.hpp"
 
@@ -46,6 +47,27 @@ bool copy_parts(ArvBuffer* b, Frame& f) {
     f.height = f.parts[0].height;
     f.bytes_per_pixel = f.parts[0].bytes_per_pixel;
     return true;
+}
+
+// GigE Vision grants one application the control channel. After a crash the dead process
+// holds it until its heartbeat expires: Aravis then opens the device without control, and
+// every register write is refused (access-denied). Try to take it until `wait_ms` have passed.
+std::string take_control(ArvCamera* camera, int wait_ms) {
+    if (!arv_camera_is_gv_device(camera)) return {};
+    auto* gv = ARV_GV_DEVICE(arv_camera_get_device(camera));
+    const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(wait_ms);
+    std::string why = "held by another application";
+    while (!arv_gv_device_is_controller(gv)) {
+        GError* e = nullptr;
+        if (arv_gv_device_take_control(gv, &e)) break;
+        if (e) why = take(e);
+        if (std::chrono::steady_clock::now() >= until)
+            return "control channel not granted after " + std::to_string(wait_ms) + " ms (" + why +
+                   "; another application holds it, or a crashed one until its heartbeat "
+                   "expires)";
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    }
+    return {};
 }
 
 }  // namespace
@@ -94,6 +116,8 @@ core::Result<std::unique_ptr<Camera>> Camera::open(const CameraConfig& c) {
     auto fail = [&](const std::string& what) -> core::Error {
         return core::make_error(impl->name + ": " + what + ": " + take(e));
     };
+    if (const auto why = take_control(impl->camera, c.control_wait_ms); !why.empty())
+        return core::make_error(impl->name + ": " + why);
     ArvDevice* device = arv_camera_get_device(impl->camera);
     impl->lost_handler =
         g_signal_connect(device, "control-lost", G_CALLBACK(+[](ArvDevice*, gpointer flag) {

@@ -68,7 +68,7 @@ std::optional<pipeline::PartResult> measure_job(const MeasureJob& a, core::Recor
             return std::nullopt;
         }
         pose_file = fs::path(a.recording).lexically_normal().string() + ".truth/part_pose.yaml";
-        if (!fs::exists(pose_file)) {
+        if (std::error_code ec; !fs::exists(pose_file, ec)) {
             spdlog::error("--pose truth: {} not found (only simulated recordings have a truth)",
                           pose_file);
             return std::nullopt;

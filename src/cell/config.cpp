@@ -37,9 +37,7 @@ double positive(const YamlReader& y, const YAML::Node& map, const std::string& w
 // A path relative to the config file's folder; it must exist.
 fs::path existing(const YamlReader& y, const YAML::Node& node, const std::string& what,
                   const fs::path& base) {
-    const fs::path p = base / y.string(node, what);
-    if (!fs::exists(p)) y.fail(node, what + ": " + p.string() + " does not exist");
-    return p;
+    return y.existing(node, what, base / y.string(node, what));
 }
 
 void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a) {
@@ -61,6 +59,7 @@ void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a)
                   "buffers",
                   "timeout_ms",
                   "max_timeouts",
+                  "control_wait_ms",
                   "features",
                   "scan_s",
                   "speed_mm_s",
@@ -96,6 +95,7 @@ void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a)
     cam.n_buffers = integer_in(y, c, w, "buffers", 2, 1024, cam.n_buffers);
     cam.timeout_ms = integer_in(y, c, w, "timeout_ms", 1, 600000, cam.timeout_ms);
     cam.max_timeouts = integer_in(y, c, w, "max_timeouts", 1, 1000, cam.max_timeouts);
+    cam.control_wait_ms = integer_in(y, c, w, "control_wait_ms", 0, 60000, cam.control_wait_ms);
     if (const YAML::Node f = c["features"]) {  // an ordered list of [NAME, VALUE]
         if (!f.IsSequence()) y.fail(f, w + ".features: expected a list of [NAME, VALUE]");
         for (std::size_t i = 0; i < f.size(); ++i) {

@@ -712,7 +712,9 @@ std::string Daemon::Impl::publish(const Captured& c, const pipeline::PartResult&
         return "FAULT " + std::to_string(c.fault) + " (" +
                plc::to_string(static_cast<plc::ErrorCode>(c.fault)) + "): " + c.failure;
     }
-    if (auto ok = server->finish(job.trigger.trigger_id, to_plc(r, check)); !ok)
+    plc::PartResult published = to_plc(r, check);
+    published.sequence = job.sequence;
+    if (auto ok = server->finish(job.trigger.trigger_id, published); !ok)
         return verdict_text(r, check) + ", not published: " + ok.error().message;
     problem = r.measurement.verdict != measure::Verdict::kOk || r.degraded;
     return verdict_text(r, check);
@@ -836,15 +838,21 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
         if (!p) return core::make_error("pyrometer: " + p.error().message);
         impl->pyrometer = std::move(*p);
     }
-    auto server = plc::Server::start(c.plc);
+    plc::ServerConfig plc = c.plc;  // the PLC's count goes on from the results files
+    plc.first_sequence = static_cast<std::uint16_t>((impl->stats.next_sequence - 1) & 0xFFFF);
+    auto server = plc::Server::start(plc);
     if (!server) return server.error();
     impl->server = std::move(*server);
     // The camera: opened now so that the first part does not wait; if it is not there, the
     // first trigger tries again (and fails that part with the reason if it still is not).
     impl->prepare_acquisition(setup);
+    const auto opening = Clock::now();
     if (auto ok = impl->session->connect(); !ok)
         spdlog::warn("camera {}: {} (retried at the first trigger)", c.acquisition.camera.id,
                      ok.error().message);
+    else if (const auto took = std::chrono::duration_cast<milliseconds>(Clock::now() - opening);
+             took > milliseconds(500))  // after a crash: the old control channel had to expire
+        spdlog::info("camera {}: opened in {} ms", c.acquisition.camera.id, took.count());
     impl->prepare_results(setup);
     if (!impl->log) spdlog::error("results: {}", impl->log_error);
     impl->acq_beat = impl->proc_beat = Impl::steady_ns();

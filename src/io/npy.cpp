@@ -198,6 +198,24 @@ std::optional<std::uint64_t> data_bytes(const std::vector<std::int64_t>& shape,
 }  // namespace
 
 core::Result<NpyArray> read_npy(const std::filesystem::path& path) {
+    auto arr = read_npy_header(path);
+    if (!arr) return arr.error();
+    arr->data.resize(static_cast<std::size_t>(arr->data_bytes));
+    if (auto ok = read_npy_data(path, *arr, arr->data.data()); !ok) return ok.error();
+    return arr;
+}
+
+core::Result<void> read_npy_data(const std::filesystem::path& path, const NpyArray& header,
+                                 void* out) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) return make_error(where(path) + "cannot open for reading");
+    in.seekg(static_cast<std::streamoff>(header.data_offset));
+    in.read(static_cast<char*>(out), static_cast<std::streamsize>(header.data_bytes));
+    if (!in) return make_error(where(path) + "read error in .npy data");
+    return {};
+}
+
+core::Result<NpyArray> read_npy_header(const std::filesystem::path& path) {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(path, ec)) return make_error(where(path) + "missing");
     const std::uintmax_t file_size = std::filesystem::file_size(path, ec);
@@ -248,9 +266,8 @@ core::Result<NpyArray> read_npy(const std::filesystem::path& path) {
         return make_error(where(path) + "unexpected trailing data: shape " + shape_repr(arr.shape) +
                           " of '" + arr.descr + "' needs " + std::to_string(*expected) +
                           " bytes, file has " + std::to_string(actual));
-    arr.data.resize(static_cast<std::size_t>(*expected));
-    in.read(reinterpret_cast<char*>(arr.data.data()), static_cast<std::streamsize>(*expected));
-    if (!in) return make_error(where(path) + "read error in .npy data");
+    arr.data_offset = data_offset;
+    arr.data_bytes = *expected;
     return arr;
 }
 

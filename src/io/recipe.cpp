@@ -126,9 +126,7 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
             const auto ext = mesh.extension().string();
             if (ext != ".ply" && ext != ".stl" && ext != ".PLY" && ext != ".STL")
                 y.fail(g["mesh_file"], "geometry.mesh_file: expected a .ply or .stl file");
-            if (!std::filesystem::exists(mesh))
-                y.fail(g["mesh_file"], "geometry.mesh_file: " + mesh.string() + " not found");
-            r.mesh_file = mesh.string();
+            r.mesh_file = y.existing(g["mesh_file"], "geometry.mesh_file", mesh).string();
         }
         const std::string kind = y.string(y.require(g, "geometry", "kind"), "geometry.kind");
         if (kind != "axisymmetric")

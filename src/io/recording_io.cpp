@@ -253,7 +253,7 @@ Result<NpyArray> read_array(const fs::path& dir, const char* name, const char* d
                             std::size_t dims, std::vector<std::int64_t> tail,
                             const char* expected_shape) {
     const fs::path path = dir / name;
-    auto arr = read_npy(path);
+    auto arr = read_npy_header(path);  // the data comes later, after every shape is checked
     if (!arr) return arr.error();
     if (arr->descr != descr)
         return make_error(where(path) + "dtype '" + arr->descr + "', expected '" + descr + "'");
@@ -269,11 +269,12 @@ Result<NpyArray> read_array(const fs::path& dir, const char* name, const char* d
     return arr;
 }
 
+// The data of `a` (a header from read_array) straight into `out`: no second copy in memory.
 template <class T>
-std::vector<T> to_vector(const NpyArray& a) {
-    std::vector<T> v(a.data.size() / sizeof(T));
-    if (!v.empty()) std::memcpy(v.data(), a.data.data(), v.size() * sizeof(T));
-    return v;
+Result<void> read_into(const fs::path& dir, const char* name, const NpyArray& a,
+                       std::vector<T>& out) {
+    out.resize(a.data_bytes / sizeof(T));
+    return read_npy_data(dir / name, a, out.data());
 }
 
 Result<FaceScan> read_face(const fs::path& root, const std::string& name) {
@@ -331,11 +332,15 @@ Result<FaceScan> read_face(const fs::path& root, const std::string& name) {
                           " entries, expected " + std::to_string(acc->shape[0]) +
                           " (one per sample in accel.npy)");
     f.width = prof->shape[1];
-    f.profiles_mm = to_vector<float>(*prof);
-    f.profile_times_ns = to_vector<std::int64_t>(*pt);
-    f.profile_positions_mm = to_vector<double>(*pp);
-    f.accel_mps2 = to_vector<float>(*acc);
-    f.accel_times_ns = to_vector<std::int64_t>(*at);
+    for (auto ok : {read_into(dir, "profiles.npy", *prof, f.profiles_mm),
+                    read_into(dir, "profile_times.npy", *pt, f.profile_times_ns),
+                    read_into(dir, "profile_positions.npy", *pp, f.profile_positions_mm),
+                    read_into(dir, "accel.npy", *acc, f.accel_mps2),
+                    read_into(dir, "accel_times.npy", *at, f.accel_times_ns)})
+        if (!ok) return ok.error();
+    // A point is a pair of finite numbers; ±Inf is no more a point than NaN is.
+    for (float& v : f.profiles_mm)
+        if (!std::isfinite(v)) v = std::numeric_limits<float>::quiet_NaN();
     if (auto ok = check_arrays(f, dir); !ok) return ok.error();
     return f;
 }

@@ -8,13 +8,24 @@
 namespace hotgauge::io {
 
 YAML::Node YamlReader::load() const {
-    if (!std::filesystem::exists(file_)) throw YamlError(file_ + ": file not found");
+    std::error_code ec;  // a name too long, a symlink loop: an error here, never an exception
+    if (!std::filesystem::exists(file_, ec))
+        throw YamlError(file_ + ": " + (ec ? ec.message() : std::string("file not found")));
     try {
         return YAML::LoadFile(file_);
     } catch (const YAML::Exception& e) {
         throw YamlError(file_ + ":" + std::to_string(e.mark.line + 1) +
                         ": YAML syntax error: " + e.msg);
     }
+}
+
+std::filesystem::path YamlReader::existing(const YAML::Node& node, const std::string& what,
+                                           const std::filesystem::path& path) const {
+    std::error_code ec;
+    const bool there = std::filesystem::exists(path, ec);
+    if (ec) fail(node, what + ": " + path.string() + ": " + ec.message());
+    if (!there) fail(node, what + ": " + path.string() + " does not exist");
+    return path;
 }
 
 std::string YamlReader::where(const YAML::Node& node) const {

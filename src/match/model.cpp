@@ -276,8 +276,20 @@ core::Result<void> Model::validate() const {
     if (axisymmetric ? profile.empty() : dense_points.empty())
         return bad(axisymmetric ? "axisymmetric model without a profile"
                                 : "model without dense samples");
+    // A checksum only says the bytes are what a writer wrote; a NaN sample would make every
+    // part "not found" (issue 18, finding 7).
+    const auto finite = [](const std::vector<Eigen::Vector3f>& v) {
+        return std::all_of(v.begin(), v.end(), [](const auto& p) { return p.allFinite(); });
+    };
+    if (!finite(points) || !finite(dense_points)) return bad("a sample point is not finite");
     for (const auto& n : normals)
         if (!n.allFinite() || std::abs(n.norm() - 1.0f) > 1e-3f) return bad("a normal is not unit");
+    for (const auto& n : dense_normals)
+        if (!n.allFinite() || std::abs(n.norm() - 1.0f) > 1e-3f)
+            return bad("a dense normal is not unit");
+    for (const auto& s : profile)
+        if (!std::isfinite(s.value) || !std::isfinite(s.lo) || !std::isfinite(s.hi) || s.lo > s.hi)
+            return bad("a profile segment is not finite or runs backwards");
     for (auto r : refs)
         if (r >= points.size()) return bad("a reference index is out of range");
     if (static_cast<double>(n_keys()) * 4 > 4e9) return bad("table too large");

@@ -46,8 +46,9 @@ core::Result<void> check_result(const PartResult& r) {
     return {};
 }
 
-Handshake::Handshake(WordOrder order) : order_(order) {
+Handshake::Handshake(WordOrder order, std::uint16_t first_sequence) : order_(order) {
     inputs_[ir::kMapVersionReg] = kMapVersion;
+    inputs_[ir::kSequence] = first_sequence;
     set_state(State::kIdle);
     clear_result();
 }
@@ -171,7 +172,9 @@ core::Result<void> Handshake::finish(std::uint32_t trigger_id, const PartResult&
     inputs_[ir::kFeatureCount] = static_cast<std::uint16_t>(result.features.size());
     inputs_[ir::kOverallVerdict] = static_cast<std::uint16_t>(result.overall);
     inputs_[ir::kTemperature] = std::bit_cast<std::uint16_t>(to_decicelsius(result.temperature_c));
-    ++inputs_[ir::kSequence];
+    inputs_[ir::kSequence] = result.sequence
+                                 ? static_cast<std::uint16_t>(*result.sequence & 0xFFFF)
+                                 : static_cast<std::uint16_t>(inputs_[ir::kSequence] + 1);
     set_state(State::kDone);
     return {};
 }

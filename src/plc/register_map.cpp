@@ -161,7 +161,9 @@ const std::vector<Row>& status_rows() {
          "0 last command accepted, else why it was refused (1xx)"},
         {ir::kCommandCount, 1, "uint16", "command count",
          "+1 per command taken (accepted or refused), wraps"},
-        {ir::kSequence, 1, "uint16", "result sequence", "+1 on every DONE, wraps"},
+        {ir::kSequence, 1, "uint16", "result sequence",
+         "the results files' sequence number of the result shown (low 16 bits); changes on "
+         "every DONE, continues across restarts"},
         {ir::kPartId, 2, "uint32", "part id", "echo of the cycle's part id (0 when IDLE)"},
         {ir::kRecipeSlot, 1, "uint16", "recipe slot", "echo of the cycle's recipe slot"},
         {ir::kFace, 1, "uint16", "face", "echo of the cycle's face"},

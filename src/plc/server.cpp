@@ -82,7 +82,32 @@ struct Client {
     std::vector<std::uint8_t> rx, tx;
     Clock::time_point last_request;
     std::array<std::uint64_t, kRejectionKinds> rejected{};
+    std::uint64_t requests = 0;  // complete requests served
     bool closing = false;
+};
+
+// Who gives way when every slot is taken: a connection that never sent a request before one
+// that did, then the one idle longest. A PLC polls, so it is never the one chosen while
+// anybody is merely holding a socket open.
+bool gives_way_before(const Client& a, const Client& b) {
+    if ((a.requests == 0) != (b.requests == 0)) return a.requests == 0;
+    return a.last_request < b.last_request;
+}
+
+// At most one line per `period`; what was held back is counted into the next one.
+struct LogBudget {
+    Clock::duration period;
+    Clock::time_point next{};
+    std::uint64_t held_back = 0;
+    // True: log now, mentioning `held_back` (then zero it).
+    bool take(Clock::time_point now) {
+        if (now < next) {
+            ++held_back;
+            return false;
+        }
+        next = now + period;
+        return true;
+    }
 };
 
 // Closes with an RST rather than a FIN: a refused client sees "connection reset" at once.
@@ -133,10 +158,10 @@ struct Server::Impl {
     ServerStats stats;
 
     std::vector<Client> clients;           // server thread only
-    std::set<std::string> refused_logged;  // server thread only
-    bool limit_logged = false;             // server thread only
+    std::set<std::string> refused_logged;  // server thread only; bounded, see refuse()
+    LogBudget refusal_log{std::chrono::seconds(10)}, eviction_log{std::chrono::seconds(10)};
 
-    explicit Impl(const ServerConfig& c) : config(c), handshake(c.word_order) {
+    explicit Impl(const ServerConfig& c) : config(c), handshake(c.word_order, c.first_sequence) {
         for (const auto& s : c.allowed_clients) allowed.push_back(*parse_cidr(s));
         for (int u : c.unit_ids) units[static_cast<std::size_t>(u)] = true;
     }
@@ -156,6 +181,7 @@ struct Server::Impl {
     void run();
     void accept_all();
     void refuse(int fd, const std::string& ip, const char* why);
+    void make_room(const std::string& ip);
     void read_from(Client& c);
     void serve_frames(Client& c);
     std::vector<std::uint8_t> serve_pdu(Client& c, std::uint8_t unit, const std::uint8_t* pdu,
@@ -302,7 +328,6 @@ void Server::Impl::run() {
         if (clients.size() != before) {
             std::lock_guard lock(mutex);
             stats.clients = static_cast<int>(clients.size());
-            limit_logged = false;
         }
     }
 }
@@ -313,8 +338,40 @@ void Server::Impl::refuse(int fd, const std::string& ip, const char* why) {
         std::lock_guard lock(mutex);
         ++stats.refused;
     }
-    if (refused_logged.insert(std::string(why) + ip).second)
-        log().warn("refused a connection from {}: {} (logged once per address)", ip, why);
+    // Once per address, and at most one line per 10 s however many addresses try.
+    if (refused_logged.size() >= 1024 || refused_logged.count(std::string(why) + ip)) return;
+    if (!refusal_log.take(Clock::now())) return;
+    refused_logged.insert(std::string(why) + ip);
+    log().warn(
+        "refused a connection from {}: {} (logged once per address, at most every 10 s; "
+        "{} refusals not logged before this one)",
+        ip, why, std::exchange(refusal_log.held_back, 0));
+}
+
+// Every slot taken: the connection that gives way (gives_way_before) is closed for `ip`, so a
+// PLC can always get in (docs/plc-modbus.md "Connections").
+void Server::Impl::make_room(const std::string& ip) {
+    auto victim = clients.end();
+    for (auto it = clients.begin(); it != clients.end(); ++it)
+        if (!it->closing && (victim == clients.end() || gives_way_before(*it, *victim)))
+            victim = it;
+    if (victim == clients.end()) return;
+    const auto idle_ms =
+        std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - victim->last_request)
+            .count();
+    {
+        std::lock_guard lock(mutex);
+        ++stats.evicted;
+    }
+    if (eviction_log.take(Clock::now()))
+        log().warn(
+            "{} connections (the limit): closed {} ({} requests, idle {} ms) for a new one from "
+            "{}; {} such closes not logged before this one",
+            config.max_connections, victim->peer, victim->requests, idle_ms, ip,
+            std::exchange(eviction_log.held_back, 0));
+    reset_and_close(victim->fd);
+    victim->closing = true;
+    std::erase_if(clients, [](const Client& c) { return c.closing; });
 }
 
 void Server::Impl::accept_all() {
@@ -337,18 +394,7 @@ void Server::Impl::accept_all() {
             refuse(fd, ip, "not on the allow-list");
             continue;
         }
-        if (clients.size() >= static_cast<std::size_t>(config.max_connections)) {
-            reset_and_close(fd);
-            std::lock_guard lock(mutex);
-            ++stats.refused;
-            if (!limit_logged)
-                log().warn(
-                    "refused a connection from {}: {} connections already (the limit); "
-                    "further refusals are counted, not logged",
-                    ip, clients.size());
-            limit_logged = true;
-            continue;
-        }
+        if (clients.size() >= static_cast<std::size_t>(config.max_connections)) make_room(ip);
         const int one = 1;
         ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
         Client c;
@@ -407,6 +453,7 @@ void Server::Impl::serve_frames(Client& c) {
         auto pdu = serve_pdu(c, unit, h + kMbapSize, length - 1u);
         used += 6u + length;
         c.last_request = Clock::now();
+        ++c.requests;
         put16(c.tx, transaction);
         put16(c.tx, 0);
         put16(c.tx, static_cast<std::uint16_t>(pdu.size() + 1));

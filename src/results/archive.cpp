@@ -43,9 +43,9 @@ std::vector<fs::path> recordings(const fs::path& dir) {
     std::vector<fs::path> out;
     std::error_code ec;
     for (const auto& day : fs::directory_iterator(dir, ec)) {
-        if (!day.is_directory()) continue;
+        if (!day.is_directory(ec)) continue;
         for (const auto& rec : fs::directory_iterator(day.path(), ec))
-            if (rec.is_directory()) out.push_back(rec.path());
+            if (rec.is_directory(ec)) out.push_back(rec.path());
     }
     std::sort(out.begin(), out.end());
     return out;

@@ -239,7 +239,8 @@ core::Result<ResultsLog::OpenFile*> ResultsLog::file(const std::filesystem::path
     if (auto it = files_.find(path); it != files_.end()) return &it->second;
     // One file per day and kind: close yesterday's.
     if (files_.size() > 8) close_all();
-    const bool existed = std::filesystem::exists(path);
+    std::error_code ec;
+    const bool existed = std::filesystem::exists(path, ec);
     const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
     if (fd < 0) return core::make_error(path.string() + ": " + errno_text(errno));
     OpenFile f{fd, {}};

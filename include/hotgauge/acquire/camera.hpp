@@ -29,6 +29,9 @@ struct CameraConfig {
     int n_buffers = 16;     // buffer pool
     int timeout_ms = 1000;  // no frame for this long while streaming: a timeout
     int max_timeouts = 3;   // consecutive timeouts before the camera counts as lost
+    // GigE Vision: another application holds the control channel (a crashed process, until its
+    // heartbeat expires, 3 s by default): try to take it for this long before giving up.
+    int control_wait_ms = 5000;
 };
 
 // What the stream delivered; never silently zero-filled.

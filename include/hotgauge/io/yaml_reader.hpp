@@ -6,6 +6,7 @@
 
 #include <Eigen/Geometry>
 #include <array>
+#include <filesystem>
 #include <initializer_list>
 #include <stdexcept>
 #include <string>
@@ -26,6 +27,11 @@ class YamlReader {
 
     // Loads the file; throws YamlError("file:line: ...") on I/O or syntax errors.
     YAML::Node load() const;
+
+    // `path` (named by `node`) must exist; one the filesystem cannot look at (a name too long, a
+    // symlink loop, no permission) fails at `node` with the reason, as a missing one does.
+    std::filesystem::path existing(const YAML::Node& node, const std::string& what,
+                                   const std::filesystem::path& path) const;
 
     // "file:line: " for a node (1-based line).
     std::string where(const YAML::Node& node) const;
@@ -49,7 +55,8 @@ class YamlReader {
     // A 3×3 proper rotation (orthonormal, det +1 within 1e-6).
     Eigen::Matrix3d rotation(const YAML::Node& node, const std::string& what) const;
 
-    // Runs a reader body; YamlError and yaml-cpp exceptions become an Error naming file:line.
+    // Runs a reader body; YamlError and yaml-cpp exceptions become an Error naming file:line, any
+    // other exception one naming the file.
     template <class T, class Body>
     core::Result<T> guarded(Body&& body) const {
         try {
@@ -58,6 +65,8 @@ class YamlReader {
             return core::make_error(e.what());
         } catch (const YAML::Exception& e) {
             return core::make_error(file_ + ":" + std::to_string(e.mark.line + 1) + ": " + e.msg);
+        } catch (const std::exception& e) {  // filesystem_error, bad_alloc: never escapes
+            return core::make_error(file_ + ": " + e.what());
         }
     }
 

@@ -32,6 +32,10 @@ struct PartResult {
     std::vector<FeatureValue> features;       // at most kMaxFeatures, unique slots
     Verdict overall = Verdict::kNotMeasured;  // kOk, kNok, kNotMeasured or kDegraded
     std::optional<double> temperature_c;
+    // The results files' sequence number of this part; input 5 shows its low 16 bits, so the
+    // PLC's count continues across restarts and names the results-file row. Unset: the last
+    // DONE's + 1 (a server without results files, `hotgauge plc serve`).
+    std::optional<std::uint64_t> sequence;
 };
 
 // The overall verdict by the documented rule: any NOK -> NOK; else any not measured -> not
@@ -61,7 +65,8 @@ class Handshake {
   public:
     using InputImage = std::array<std::uint16_t, ir::kCount>;
 
-    explicit Handshake(WordOrder order = WordOrder::kBigEndian);
+    // `first_sequence`: input 5 before the first DONE (the last result's, after a restart).
+    explicit Handshake(WordOrder order = WordOrder::kBigEndian, std::uint16_t first_sequence = 0);
 
     // Applies a Modbus write of `values` at `address` inside the writable holding block (the
     // caller has checked the range), then takes the command register if it is non-zero: the

@@ -17,17 +17,23 @@ struct ServerConfig {
     int port = 502;                            // 0: ephemeral, see Server::port()
     std::vector<int> unit_ids = {0, 1, 255};   // accepted unit identifiers; others get 0x0B
     std::vector<std::string> allowed_clients;  // IPv4 "a.b.c.d" or "a.b.c.d/n"; empty: anyone
-    int max_connections = 8;      // further connections are accepted and closed at once (RST)
+    // Every slot taken: a new connection closes the one that never sent a request, else the one
+    // idle longest (RST), so the PLC can always get in.
+    int max_connections = 8;
     int idle_timeout_ms = 60000;  // no complete request for this long: closed; 0: never
     int heartbeat_period_ms = 100;
     WordOrder word_order = WordOrder::kBigEndian;
+    // Not a setting: input 5 before the first DONE, the daemon's last result sequence from its
+    // results files (docs/plc-modbus.md "Across a restart").
+    std::uint16_t first_sequence = 0;
 };
 
 core::Result<void> check_config(const ServerConfig& c);
 
 struct ServerStats {
     std::uint64_t accepted = 0;   // connections
-    std::uint64_t refused = 0;    // over the limit or not on the allow-list
+    std::uint64_t refused = 0;    // not on the allow-list
+    std::uint64_t evicted = 0;    // closed to make room for a new one (max_connections)
     std::uint64_t timed_out = 0;  // closed for idleness
     std::uint64_t malformed = 0;  // connections closed for a malformed MBAP header
     std::uint64_t requests = 0;
