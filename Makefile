@@ -16,7 +16,7 @@ DEB_PACKAGES := build-essential cmake pkg-config clang-format \
 
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: deps build build-asan demo test bench format clean
+.PHONY: deps build build-asan demo test bench format clean soak
 
 deps:
 	@missing=$$(for p in $(DEB_PACKAGES); do \
@@ -48,6 +48,17 @@ build-asan: deps $(BUILD_ASAN)/CMakeCache.txt
 DEMO_OUT ?= out/line
 demo: build
 	/usr/bin/python3 tests/virtual_line.py --bin-dir $(BUILD) --parts 12 --commission 1 --master-at 6 --out $(DEMO_OUT)
+
+# The fault soak (issue 18, tests/soak.py): the virtual line for SOAK_PARTS parts with faults on
+# a seeded schedule (accelerometer loss and outage, camera packet loss and restarts, PLC
+# disconnects, a full results disk, SIGHUP with a bad and a good config, kill -9 of hotgauged
+# with a supervisor that restarts it like systemd), then the report: parts in, results out, lost,
+# duplicated, false NOK, faults by code, RSS over time, cycle time. About 11 s a part.
+SOAK_PARTS ?= 1000
+SOAK_SEED ?= 1
+SOAK_OUT ?= out/soak
+soak: build
+	/usr/bin/python3 tests/soak.py --bin-dir $(BUILD) --parts $(SOAK_PARTS) --seed $(SOAK_SEED) --out $(SOAK_OUT)
 
 test: build build-asan
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)

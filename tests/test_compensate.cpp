@@ -401,15 +401,23 @@ TEST(CompensateFace, TailErrorIsWhyTheMarginRuleExists) {
     EXPECT_LT(long_record[5], 8.0);
 }
 
-// How far a 60 ms accelerometer gap spoils the displacement around it (docs/compensation.md
-// "Gaps"): gaps at several places in every face's scan, RMS |u_est − u_true| by the profile's
-// distance from the gap (0: inside it), beside the same profiles without the gap. The pad that
-// compensate_face leaves out around a gap (degrade_pad_s) is read off this table.
-TEST(CompensateFace, GapErrorByDistanceIsWhyThePadExists) {
-    const double edges[] = {0.0, 1e-9, 0.025, 0.05, 0.1, 0.2, 0.5, 100.0};
-    constexpr int kBins = 7;
+namespace {
+
+// |u_est − u_true| by a profile's distance from an accelerometer gap of `gap_ns` (bin 0: inside
+// it), gaps at several places in every face's scan, beside the same profiles without the gap.
+struct GapErrors {
+    static constexpr int kBins = 7;
+    static constexpr double kEdges[kBins + 1] = {0.0, 1e-9, 0.025, 0.05, 0.1, 0.2, 0.5, 100.0};
+    std::vector<double> rms, worst, base, n;
+    double untrusted_share = 0;  // of the profiles, over every face and gap
+};
+
+GapErrors gap_errors(std::int64_t gap_ns, int seeds) {
+    constexpr int kBins = GapErrors::kBins;
+    const auto& edges = GapErrors::kEdges;
     std::vector<double> s2(kBins, 0.0), base2(kBins, 0.0), worst(kBins, 0.0), n(kBins, 0.0);
-    for (std::uint64_t seed = 1; seed <= 4; ++seed) {
+    double untrusted = 0, profiles = 0;
+    for (std::uint64_t seed = 1; seed <= static_cast<std::uint64_t>(seeds); ++seed) {
         const auto s = simulate(env().cell, seed);
         for (std::size_t j = 0; j < s.recording.faces.size(); ++j) {
             const core::FaceScan& full = s.recording.faces[j];
@@ -419,13 +427,15 @@ TEST(CompensateFace, GapErrorByDistanceIsWhyThePadExists) {
                 const std::int64_t t0 = f.profile_times_ns.front(), t1 = f.profile_times_ns.back();
                 const std::int64_t g0 =
                     t0 + static_cast<std::int64_t>(at * static_cast<double>(t1 - t0));
-                const std::int64_t g1 = g0 + 60'000'000;
+                const std::int64_t g1 = g0 + gap_ns;
                 std::size_t a = 0, b = 0;
                 while (a < f.accel_times_ns.size() && f.accel_times_ns[a] < g0) ++a;
                 for (b = a; b < f.accel_times_ns.size() && f.accel_times_ns[b] < g1;) ++b;
                 f.accel_times_ns.erase(f.accel_times_ns.begin() + a, f.accel_times_ns.begin() + b);
                 f.accel_mps2.erase(f.accel_mps2.begin() + 3 * a, f.accel_mps2.begin() + 3 * b);
                 const auto fc = compensate::compensate_face(f, {});
+                untrusted += static_cast<double>(fc.n_degraded);
+                profiles += static_cast<double>(fc.u_mm.size());
                 for (std::size_t k = 0; k < fc.u_mm.size(); ++k) {
                     const std::int64_t t = f.profile_times_ns[k];
                     const double d =
@@ -442,23 +452,47 @@ TEST(CompensateFace, GapErrorByDistanceIsWhyThePadExists) {
             }
         }
     }
-    std::printf(
-        "60 ms gap: |error| by distance from the gap (RMS with gap / worst / RMS without)\n");
-    std::vector<double> rms(kBins), base(kBins);
+    GapErrors out{{}, worst, {}, n, untrusted / std::max(1.0, profiles)};
     for (int b = 0; b < kBins; ++b) {
-        rms[b] = std::sqrt(s2[b] / std::max(1.0, n[b]));
-        base[b] = std::sqrt(base2[b] / std::max(1.0, n[b]));
-        std::printf("  %5.3f-%5.3f s: %6.1f / %6.1f / %5.1f um (%g profiles)\n", edges[b],
-                    std::min(edges[b + 1], 9.9), rms[b], worst[b], base[b], n[b]);
+        out.rms.push_back(std::sqrt(s2[b] / std::max(1.0, n[b])));
+        out.base.push_back(std::sqrt(base2[b] / std::max(1.0, n[b])));
     }
-    EXPECT_GT(rms[0], 5.0 * base[0]);  // inside the gap: far off, the profiles are left out
-    // Beyond the pad the gap adds a few µm to the compensation's own error (with a straight
-    // line over the gap and no bridging: 290 µm RMS at 0.1–0.2 s, measured 2026-12-03).
-    const double pad = CompensationConfig{}.degrade_pad_s;
-    for (int b = 1; b < kBins; ++b)
-        if (edges[b] >= pad - 1e-12 && n[b] > 0) {
-            EXPECT_LT(rms[b], 3.0 * base[b] + 1.0) << "bin " << b;
+    return out;
+}
+
+}  // namespace
+
+// How far an accelerometer gap spoils the displacement around it, by the gap's length (a lost
+// datagram is 10 ms; docs/compensation.md "Gaps and degraded features"). The pad left out around
+// a gap (degrade_pad_s) and the longest hole bridged (max_bridge_s) are read off this table:
+// beyond the pad the bridged displacement must be within a few µm of the compensation's own
+// error. Longer holes are not (measured 2026-12-03, 2 seeds: 100 ms 26.6 µm RMS at 0.1–0.2 s,
+// 150 ms 41.3, 250 ms 21.6 and still 21.6 at 0.2–0.5 s, against 4.6): their face is untrusted.
+TEST(CompensateFace, GapErrorByDistanceIsWhyThePadExists) {
+    const CompensationConfig c;
+    for (const auto& [gap_ms, seeds] : {std::pair{10, 4}, {30, 4}, {60, 4}, {100, 2}, {250, 1}}) {
+        const GapErrors g = gap_errors(gap_ms * 1'000'000LL, seeds);
+        std::printf(
+            "%d ms gap: |error| by distance from the gap (RMS with gap / worst / RMS without)\n",
+            gap_ms);
+        for (int b = 0; b < GapErrors::kBins; ++b)
+            std::printf("  %5.3f-%5.3f s: %6.1f / %6.1f / %5.1f um (%g profiles)\n",
+                        GapErrors::kEdges[b], std::min(GapErrors::kEdges[b + 1], 9.9), g.rms[b],
+                        g.worst[b], g.base[b], g.n[b]);
+        // Inside the gap: far off (the profiles are left out).
+        EXPECT_GT(g.rms[0], 5.0 * g.base[0]) << gap_ms << " ms";
+        if (gap_ms * 1e-3 > c.max_bridge_s) {
+            EXPECT_EQ(g.untrusted_share, 1.0) << gap_ms << " ms: the whole face is untrusted";
+            continue;
         }
+        // Beyond the pad the gap adds a few µm to the compensation's own error (with a straight
+        // line over a 60 ms gap and no bridging: 290 µm RMS at 0.1–0.2 s, measured 2026-12-03).
+        for (int b = 1; b < GapErrors::kBins; ++b)
+            if (GapErrors::kEdges[b] >= c.degrade_pad_s - 1e-12 && g.n[b] > 0) {
+                EXPECT_LT(g.rms[b], 3.0 * g.base[b] + 1.0) << gap_ms << " ms, bin " << b;
+            }
+        EXPECT_LT(g.untrusted_share, 1.0) << gap_ms << " ms: bridged, only the gap and its pad";
+    }
 }
 
 namespace {

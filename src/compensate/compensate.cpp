@@ -6,6 +6,7 @@
 #include <cmath>
 #include <numbers>
 #include <opencv2/core.hpp>
+#include <optional>
 
 namespace hotgauge::compensate {
 namespace {
@@ -227,6 +228,20 @@ std::string end_cause(const CompensationConfig& c) {
 
 // Which profiles the trouble (padded by degrade_pad_s) or the record's ends (min_margin_s)
 // reach, as runs of one cause.
+// A hole longer than max_bridge_s near the scan (within min_margin_s of it; times from the first
+// profile, the scan lasting `scan_s`) cannot be bridged within the compensation's error budget:
+// what the head did in it spoils the displacement far beyond the pad. Its reason, or nothing.
+std::optional<std::string> too_long_to_bridge(const std::vector<Trouble>& trouble, double scan_s,
+                                              double period, const CompensationConfig& c) {
+    for (const Trouble& b : trouble)  // b.t0, b.t1: the usable samples on either side
+        if (b.t1 - b.t0 - period > c.max_bridge_s && b.t1 > -c.min_margin_s &&
+            b.t0 < scan_s + c.min_margin_s)
+            return b.cause + " of " + std::to_string(std::lround((b.t1 - b.t0 - period) * 1000)) +
+                   " ms at " + fmt_s(b.t0) + ": longer than the " + fmt_s(c.max_bridge_s) +
+                   " that can be bridged";
+    return std::nullopt;
+}
+
 std::vector<core::UntrustedProfiles> untrusted_runs(const core::FaceScan& face,
                                                     const std::vector<Trouble>& trouble,
                                                     double rec_t0, double rec_t1,
@@ -346,6 +361,9 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
             std::find(out.reasons.begin(), out.reasons.end(), why) == out.reasons.end())
             out.reasons.push_back(why);
     }
+    const double scan_s =
+        seconds_between(face.profile_times_ns.back(), face.profile_times_ns.front());
+    if (const auto why = too_long_to_bridge(trouble, scan_s, period, c)) degrade_all(*why);
     out.applied = n_applied > 0;
     out.rms_mm = n_applied ? std::sqrt(sum2 / static_cast<double>(n_applied)) : 0.0;
     out.degraded = out.n_degraded > 0;

@@ -22,6 +22,9 @@ struct CompensationConfig {
     // Profiles this close to a gap, a clipped or a non-finite sample are untrusted: measured in
     // test_compensate GapErrorByDistanceIsWhyThePadExists (docs/compensation.md "Gaps").
     double degrade_pad_s = 0.1;
+    // A longer hole in the record (lost datagrams, clipping) is not bridged within the error
+    // budget beyond the pad: every profile of the face is untrusted. Measured in the same test.
+    double max_bridge_s = 0.06;
 };
 
 // Displacement from uniformly sampled acceleration (one axis, SI units in, same units·s² out):
