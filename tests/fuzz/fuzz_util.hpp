@@ -49,6 +49,14 @@ inline void write_file(const std::filesystem::path& path, const std::uint8_t* da
     }
 }
 
+// The whole input as the file `name` in this process's scratch folder.
+inline std::filesystem::path input_file(const char* harness, const char* name,
+                                        const std::uint8_t* data, std::size_t size) {
+    std::filesystem::path path = scratch_dir(harness) / name;
+    write_file(path, data, size);
+    return path;
+}
+
 [[noreturn]] inline void fail(const std::string& what) {
     std::fprintf(stderr, "FUZZ CHECK FAILED: %s\n", what.c_str());
     std::abort();

@@ -1,10 +1,10 @@
 #!/usr/bin/python3
 """Writes the seed corpora of tests/fuzz/corpus/ (tests/fuzz/README.md): small valid and
 near-valid inputs for each harness. Run from the repository root; the output is committed, so this
-runs only when the seeds should change. The model seeds (fuzz_model) are files written by
-`hotgauge model build` and are not made here."""
+runs only when the seeds should change. The model seeds (fuzz_model) are not made here: they are
+io::write_model files of match::model_from_recipe(hub-a, sampling 40 mm, 4 angle and 8 alpha
+bins) and of model_from_samples (a 6x6 plate, 8 mm), behind fuzz_model.cpp's flag byte."""
 import os
-import shutil
 import struct
 
 import numpy as np
@@ -112,17 +112,66 @@ def modbus_seeds():
     out("fuzz_modbus", "split_and_malformed", trigger[:5] + trigger[5:] + b"\x00\x01\x00\x07\x00")
 
 
+def strip_comments(text):
+    """The YAML without comment lines and trailing comments: shorter inputs, more exec/s."""
+    lines = []
+    for line in text.splitlines():
+        if "#" in line and "'" not in line and '"' not in line.split("#")[0]:
+            line = line.split("#")[0].rstrip()
+        if line.strip():
+            lines.append(line)
+    return "\n".join(lines) + "\n"
+
+
+CERTIFICATE = """format: hotgauge-master-1
+master: "M-0001"
+recipe: hub-a
+certified_at: "2026-11-20"
+certified_by: "CMM lab, report 4711"
+temperature_c: 20.0
+tolerance_mm: 0.02
+features:
+  - {name: "Diameter 1", value_mm: 138.4539, u_mm: 0.001}
+  - {name: "Height 1", value_mm: 39.2704, u_mm: 0.001, tolerance_mm: 0.03}
+"""
+
+
 def yaml_seeds():
     repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    for harness, files in {
-        "fuzz_recipe": ["config/parts/hub-a.yaml"],
-        "fuzz_calibration": ["config/calibration.yaml"],
-        "fuzz_daemon_config": ["config/hotgauged.yaml"],
-    }.items():
-        for f in files:
-            d = os.path.join(ROOT, harness)
-            os.makedirs(d, exist_ok=True)
-            shutil.copy(os.path.join(repo, f), os.path.join(d, os.path.basename(f)))
+
+    def read(f):
+        with open(os.path.join(repo, f)) as fh:
+            return fh.read()
+
+    recipe = read("config/parts/hub-a.yaml")
+    config = read("config/hotgauged.yaml")
+    seeds = {
+        "fuzz_recipe": {
+            "hub-a.yaml": recipe,
+            "hub-a-short.yaml": strip_comments(recipe),
+            # fuzz_recipe.cpp puts an empty hub-a.ply beside the recipe.
+            "mesh-file.yaml": strip_comments(recipe).replace(
+                "kind: axisymmetric", "kind: axisymmetric\n  mesh_file: hub-a.ply", 1),
+        },
+        "fuzz_calibration": {
+            "calibration.yaml": read("config/calibration.yaml"),
+            "calibration-short.yaml": strip_comments(read("config/calibration.yaml")),
+        },
+        "fuzz_daemon_config": {
+            "hotgauged.yaml": config,
+            # fuzz_daemon_config.cpp creates the files these reference.
+            "hotgauged-short.yaml": strip_comments(config).replace(
+                "  1: parts/hub-a.yaml",
+                "  1: parts/hub-a.yaml\nmodels: {1: hub-a.hgm}\nmasters: {1: master.yaml}", 1),
+        },
+        "fuzz_certificate": {"master.yaml": CERTIFICATE,
+                             "master-flow.yaml": "{format: hotgauge-master-1, master: M, recipe: r,"
+                             " certified_at: x, certified_by: y, temperature_c: 20,"
+                             " tolerance_mm: 0.1, features: [{name: a, value_mm: 1, u_mm: 0}]}\n"},
+    }
+    for harness, files in seeds.items():
+        for name, text in files.items():
+            out(harness, name, text.encode())
 
 
 if __name__ == "__main__":
