@@ -2,6 +2,7 @@
 // Shared by the libFuzzer harnesses (tests/fuzz/README.md): a scratch folder per process for the
 // file-based readers, and the checks every harness makes. A failed check prints what was wrong and
 // aborts, which libFuzzer reports as a crash and saves as crash-<sha1>.
+#include <cxxabi.h>
 #include <unistd.h>
 
 #include <cstddef>
@@ -73,7 +74,9 @@ auto no_throw(const char* name, Reader&& reader) -> decltype(reader()) {
     try {
         return reader();
     } catch (const std::exception& e) {
-        fail(std::string(name) + " threw " + typeid(e).name() + ": " + e.what());
+        int status = 0;
+        char* type = abi::__cxa_demangle(typeid(e).name(), nullptr, nullptr, &status);
+        fail(std::string(name) + " threw " + (type ? type : typeid(e).name()) + ": " + e.what());
     } catch (...) {
         fail(std::string(name) + " threw a non-std exception");
     }
