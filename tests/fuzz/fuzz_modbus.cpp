@@ -104,7 +104,8 @@ void owner(Handshake& h, std::uint16_t t) {
         const auto ok = h.finish(h.busy_trigger_id(), r);
         fuzz::check(ok.ok() == (busy && valid), "finish accepted or refused wrongly");
         if (busy)
-            fuzz::check(valid ? h.state() == State::kDone && h.sequence() == sequence + 1 &&
+            fuzz::check(valid ? h.state() == State::kDone &&
+                                    h.sequence() == static_cast<std::uint16_t>(sequence + 1) &&
                                     h.inputs()[ir::kFeatureCount] == r.features.size()
                               : h.state() == State::kFault &&
                                     h.inputs()[ir::kErrorCode] ==
