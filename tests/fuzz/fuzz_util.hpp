@@ -19,21 +19,20 @@
 
 namespace hotgauge::fuzz {
 
-// A fresh folder for this process, under /dev/shm when there is one (no disk I/O), else the
-// temporary folder; removed at exit. Parallel runs (-jobs, -fork) get one each.
+// A fresh folder for this process under $FUZZ_SCRATCH (run.sh sets it and removes it after the
+// run: libFuzzer ends with _Exit, so atexit cleanup would not run), else under /dev/shm when
+// there is one (no disk I/O), else the temporary folder. Parallel runs (-jobs, -fork) get one each.
 inline const std::filesystem::path& scratch_dir(const char* harness) {
     static const std::filesystem::path dir = [harness] {
         namespace fs = std::filesystem;
         std::error_code ec;
-        const fs::path base =
-            fs::is_directory("/dev/shm", ec) ? fs::path("/dev/shm") : fs::temp_directory_path();
+        const char* env = std::getenv("FUZZ_SCRATCH");
+        const fs::path base = env && *env                        ? fs::path(env)
+                              : fs::is_directory("/dev/shm", ec) ? fs::path("/dev/shm")
+                                                                 : fs::temp_directory_path();
         fs::path d = base / ("hotgauge-" + std::string(harness) + "-" + std::to_string(::getpid()));
         fs::remove_all(d, ec);
         fs::create_directories(d);
-        std::atexit([] {
-            std::error_code ignored;
-            std::filesystem::remove_all(scratch_dir(nullptr), ignored);
-        });
         return d;
     }();
     return dir;

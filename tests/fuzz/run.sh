@@ -20,7 +20,10 @@ findings=${FUZZ_FINDINGS:-$build/fuzz-findings}
 logs=${FUZZ_LOGS:-$build/fuzz-logs}
 mkdir -p "$logs"
 scratch=$(mktemp -d "${TMPDIR:-/tmp}/hotgauge-fuzz-corpus.XXXXXX")
-trap 'rm -rf "$scratch"' EXIT
+# The harnesses' files (fuzz_util.hpp scratch_dir), in memory when there is /dev/shm.
+files=$(mktemp -d "$([ -d /dev/shm ] && echo /dev/shm || echo "${TMPDIR:-/tmp}")/hotgauge-fuzz.XXXXXX")
+export FUZZ_SCRATCH=$files
+trap 'rm -rf "$scratch" "$files"' EXIT
 
 status=0
 printf '%-20s %8s %12s %10s  %s\n' harness seconds executions exec/s result
