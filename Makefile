@@ -1,9 +1,14 @@
 # hotgauge — the two commands of the README, and what they need.
 #   make demo   install missing packages, build, run 12 hub-a parts through the virtual line
-#   make test   install missing packages, build (incl. sanitizer build), run every test
+#   make test   install missing packages, build (incl. sanitizer and fuzz builds), run every test
+#               and each fuzz harness briefly
+#   make fuzz   build the fuzz harnesses and run each for FUZZ_SECONDS (tests/fuzz/README.md)
 SHELL := /bin/bash
 BUILD ?= build
 BUILD_ASAN ?= build-asan
+BUILD_FUZZ ?= build-fuzz
+FUZZ_SECONDS ?= 600
+FUZZ_BRIEF_SECONDS ?= 6
 JOBS ?= $(shell nproc)
 
 # Every dependency, once: Debian 12 packages only.
@@ -11,12 +16,12 @@ DEB_PACKAGES := build-essential cmake pkg-config clang-format \
   libeigen3-dev libpcl-dev libopencv-dev libopencv-contrib-dev libflann-dev \
   libaravis-dev aravis-tools libmodbus-dev mbpoll socat libsystemd-dev systemd \
   libyaml-cpp-dev libspdlog-dev libcli11-dev nlohmann-json3-dev libembree-dev \
-  libgtest-dev libgmock-dev libbenchmark-dev \
+  libgtest-dev libgmock-dev libbenchmark-dev clang-14 libfuzzer-14-dev \
   python3-numpy python3-yaml python3-pymodbus python3-serial-asyncio
 
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: deps build build-asan demo test bench format clean soak
+.PHONY: deps build build-asan build-fuzz demo test fuzz fuzz-brief bench format clean soak
 
 deps:
 	@missing=$$(for p in $(DEB_PACKAGES); do \
@@ -40,6 +45,23 @@ $(BUILD_ASAN)/CMakeCache.txt:
 build-asan: deps $(BUILD_ASAN)/CMakeCache.txt
 	cmake --build $(BUILD_ASAN) -j $(JOBS)
 
+# libFuzzer harnesses (tests/fuzz/): clang, every library instrumented; only the harnesses and
+# what they link are built.
+$(BUILD_FUZZ)/CMakeCache.txt:
+	CC=clang-14 CXX=clang++-14 cmake -S . -B $(BUILD_FUZZ) -DHOTGAUGE_FUZZ=ON \
+	  -DHOTGAUGE_TESTS=OFF -DHOTGAUGE_BENCH=OFF
+
+build-fuzz: deps $(BUILD_FUZZ)/CMakeCache.txt
+	cmake --build $(BUILD_FUZZ) -j $(JOBS) --target hotgauge_fuzzers
+
+# Each harness for FUZZ_SECONDS on a scratch copy of its seeds; findings in $(BUILD_FUZZ)/fuzz-findings.
+fuzz: build-fuzz
+	tests/fuzz/run.sh $(BUILD_FUZZ) $(FUZZ_SECONDS)
+
+# make test's step: each harness for FUZZ_BRIEF_SECONDS, so that a regression is caught.
+fuzz-brief: build-fuzz
+	tests/fuzz/run.sh $(BUILD_FUZZ) $(FUZZ_BRIEF_SECONDS)
+
 # The main job on the built-in simulated cell: the virtual production line. The virtual cell
 # (GigE Vision camera, accelerometer stream, axis with its part conveyor, pyrometer on a socat
 # pair), hotgauged and a scripted pymodbus PLC run 12 hub-a parts through all four faces under
@@ -60,9 +82,10 @@ SOAK_OUT ?= out/soak
 soak: build
 	/usr/bin/python3 tests/soak.py --bin-dir $(BUILD) --parts $(SOAK_PARTS) --seed $(SOAK_SEED) --out $(SOAK_OUT)
 
-test: build build-asan
+test: build build-asan build-fuzz
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
 	cd $(BUILD_ASAN) && ctest --output-on-failure -j $(JOBS) -L unit
+	tests/fuzz/run.sh $(BUILD_FUZZ) $(FUZZ_BRIEF_SECONDS)
 
 bench: build
 	cmake --build $(BUILD) -j $(JOBS) --target hotgauge_bench_match
@@ -76,4 +99,4 @@ format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')
 
 clean:
-	rm -rf $(BUILD) $(BUILD_ASAN)
+	rm -rf $(BUILD) $(BUILD_ASAN) $(BUILD_FUZZ)

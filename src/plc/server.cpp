@@ -28,6 +28,7 @@
 #include <set>
 #include <thread>
 
+#include "hotgauge/plc/modbus_tcp.hpp"
 #include "log.hpp"
 
 namespace hotgauge::plc {
@@ -36,8 +37,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using detail::log;
 
-constexpr std::size_t kMbapSize = 7;          // transaction, protocol, length (2 each), unit
-constexpr std::size_t kMaxLengthField = 254;  // unit id + a PDU of at most 253 bytes
 constexpr std::size_t kRxCapacity = 4 * MODBUS_TCP_MAX_ADU_LENGTH;
 constexpr std::size_t kMaxEvents = 64;
 
@@ -63,15 +62,7 @@ std::optional<Cidr> parse_cidr(const std::string& s) {
     return Cidr{ntohl(a.s_addr) & mask, mask};
 }
 
-std::uint16_t be16(const std::uint8_t* p) { return static_cast<std::uint16_t>((p[0] << 8) | p[1]); }
-
-void put16(std::vector<std::uint8_t>& out, std::uint16_t v) {
-    out.push_back(static_cast<std::uint8_t>(v >> 8));
-    out.push_back(static_cast<std::uint8_t>(v & 0xFF));
-}
-
-// Rejections, each logged once per client and counted.
-enum Rejection { kIllegalFunction, kIllegalAddress, kIllegalValue, kWrongUnit, kRejectionKinds };
+// Rejections (modbus_tcp.hpp), each logged once per client and counted.
 constexpr std::array<const char*, kRejectionKinds> kRejectionNames = {
     "illegal function (exception 01)", "illegal data address (exception 02)",
     "illegal data value (exception 03)", "unknown unit id (exception 0B)"};
@@ -184,10 +175,8 @@ struct Server::Impl {
     void make_room(const std::string& ip);
     void read_from(Client& c);
     void serve_frames(Client& c);
-    std::vector<std::uint8_t> serve_pdu(Client& c, std::uint8_t unit, const std::uint8_t* pdu,
-                                        std::size_t size);
-    std::vector<std::uint8_t> reject(Client& c, Rejection kind, std::uint8_t function,
-                                     const std::string& detail);
+    std::vector<std::uint8_t> serve_pdu(Client& c, std::uint8_t unit,
+                                        std::span<const std::uint8_t> pdu);
     void flush(Client& c);
     void close_client(Client& c, const char* why);
 };
@@ -433,15 +422,11 @@ void Server::Impl::serve_frames(Client& c) {
     // One response in flight at a time: a client that does not read its responses stops being
     // read (TCP flow control) instead of growing our buffer.
     while (c.tx.empty() && !c.closing && c.rx.size() - used >= kMbapSize) {
-        const std::uint8_t* h = c.rx.data() + used;
-        const std::uint16_t transaction = be16(h);
-        const std::uint16_t protocol = be16(h + 2);
-        const std::uint16_t length = be16(h + 4);
-        const std::uint8_t unit = h[6];
-        if (protocol != 0 || length < 2 || length > kMaxLengthField) {
+        const MbapFrame f = parse_mbap(std::span(c.rx).subspan(used));
+        if (f.status == MbapFrame::Status::kMalformed) {
             // A byte stream cannot be resynchronised after a bad header: drop the connection.
             log().warn("client {}: malformed MBAP header (protocol {}, length {}): closing", c.peer,
-                       protocol, length);
+                       f.protocol, f.length);
             {
                 std::lock_guard lock(mutex);
                 ++stats.malformed;
@@ -449,112 +434,44 @@ void Server::Impl::serve_frames(Client& c) {
             close_client(c, "malformed frame");
             break;
         }
-        if (c.rx.size() - used < 6u + length) break;  // the rest is still on its way
-        auto pdu = serve_pdu(c, unit, h + kMbapSize, length - 1u);
-        used += 6u + length;
+        if (f.status == MbapFrame::Status::kIncomplete) break;  // the rest is on its way
+        const auto pdu = serve_pdu(c, f.unit, f.pdu);
+        used += f.bytes;
         c.last_request = Clock::now();
         ++c.requests;
-        put16(c.tx, transaction);
-        put16(c.tx, 0);
-        put16(c.tx, static_cast<std::uint16_t>(pdu.size() + 1));
-        c.tx.push_back(unit);
-        c.tx.insert(c.tx.end(), pdu.begin(), pdu.end());
+        append_response(c.tx, f, pdu);
         flush(c);
     }
     c.rx.erase(c.rx.begin(), c.rx.begin() + static_cast<std::ptrdiff_t>(used));
 }
 
-std::vector<std::uint8_t> Server::Impl::reject(Client& c, Rejection kind, std::uint8_t function,
-                                               const std::string& detail) {
-    if (c.rejected[kind]++ == 0)
-        log().warn("client {}: {}: {}; further ones from this client are counted, not logged",
-                   c.peer, kRejectionNames[kind], detail);
-    static constexpr std::array<std::uint8_t, kRejectionKinds> kCode = {
-        MODBUS_EXCEPTION_ILLEGAL_FUNCTION, MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS,
-        MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE, MODBUS_EXCEPTION_GATEWAY_TARGET};
-    ++stats.exceptions;  // under the mutex: called from serve_pdu
-    return {static_cast<std::uint8_t>(function | 0x80), kCode[kind]};
-}
-
 std::vector<std::uint8_t> Server::Impl::serve_pdu(Client& c, std::uint8_t unit,
-                                                  const std::uint8_t* pdu, std::size_t size) {
+                                                  std::span<const std::uint8_t> pdu) {
     std::lock_guard lock(mutex);
     ++stats.requests;
-    const std::uint8_t fc = pdu[0];
-    if (!units[unit]) return reject(c, kWrongUnit, fc, "unit " + std::to_string(unit));
-    const auto where = [&](const char* what, unsigned address, unsigned count) {
-        return std::string(what) + " at " + std::to_string(address) + " x " + std::to_string(count);
-    };
-    switch (fc) {
-        case MODBUS_FC_READ_HOLDING_REGISTERS:
-        case MODBUS_FC_READ_INPUT_REGISTERS: {
-            if (size != 5)
-                return reject(c, kIllegalValue, fc,
-                              "request of " + std::to_string(size) + " bytes");
-            const unsigned address = be16(pdu + 1), count = be16(pdu + 3);
-            const char* what =
-                fc == MODBUS_FC_READ_HOLDING_REGISTERS ? "read holding" : "read input";
-            if (count < 1 || count > MODBUS_MAX_READ_REGISTERS)
-                return reject(c, kIllegalValue, fc, where(what, address, count));
-            const unsigned end = address + count;
-            const auto& in = handshake.inputs();
-            std::vector<std::uint8_t> out{fc, static_cast<std::uint8_t>(2 * count)};
-            if (fc == MODBUS_FC_READ_INPUT_REGISTERS) {
-                if (end > ir::kCount)
-                    return reject(c, kIllegalAddress, fc, where(what, address, count));
-                for (unsigned a = address; a < end; ++a) put16(out, in[a]);
-            } else if (end <= hr::kWritableCount) {
-                for (unsigned a = address; a < end; ++a)
-                    put16(out, handshake.holding(static_cast<std::uint16_t>(a)));
-            } else if (address >= hr::kMirrorBase && end <= hr::kMirrorBase + ir::kCount) {
-                for (unsigned a = address; a < end; ++a) put16(out, in[a - hr::kMirrorBase]);
-            } else {
-                return reject(c, kIllegalAddress, fc, where(what, address, count));
-            }
-            return out;
-        }
-        case MODBUS_FC_WRITE_SINGLE_REGISTER:
-        case MODBUS_FC_WRITE_MULTIPLE_REGISTERS: {
-            const bool single = fc == MODBUS_FC_WRITE_SINGLE_REGISTER;
-            if (size < 5 || (!single && size < 6))
-                return reject(c, kIllegalValue, fc,
-                              "request of " + std::to_string(size) + " bytes");
-            const unsigned address = be16(pdu + 1);
-            const unsigned count = single ? 1u : be16(pdu + 3);
-            if (single ? size != 5
-                       : (count < 1 || count > MODBUS_MAX_WRITE_REGISTERS || pdu[5] != 2 * count ||
-                          size != 6 + 2 * count))
-                return reject(c, kIllegalValue, fc, where("write", address, count));
-            if (address + count > hr::kWritableCount)
-                return reject(c, kIllegalAddress, fc, where("write", address, count));
-            std::array<std::uint16_t, hr::kWritableCount> values{};
-            const std::uint8_t* data = single ? pdu + 3 : pdu + 6;
-            for (unsigned i = 0; i < count; ++i) values[i] = be16(data + 2 * i);
-            auto event =
-                handshake.write(static_cast<std::uint16_t>(address), {values.data(), count});
-            if (event) {
-                if (events.size() == kMaxEvents) {
-                    log().warn(
-                        "event queue full: the owner does not take PLC commands; dropping "
-                        "the oldest");
-                    events.pop_front();
-                }
-                if (event->kind == PlcEvent::Kind::kTrigger)
-                    log().debug("trigger {} from {}: part {}, recipe slot {}, face {}",
-                                event->trigger.trigger_id, c.peer, event->trigger.part_id,
-                                event->trigger.recipe_slot, static_cast<int>(event->trigger.face));
-                else
-                    log().debug("reset from {}", c.peer);
-                events.push_back(*event);
-                events_cv.notify_one();
-            }
-            // FC06 echoes the request; FC16 answers function, address, quantity: both are the
-            // request's first five bytes.
-            return {pdu, pdu + 5};
-        }
-        default:
-            return reject(c, kIllegalFunction, fc, "function " + std::to_string(fc));
+    RequestOutcome out = serve_request(handshake, units, unit, pdu);
+    if (out.rejection) {
+        if (c.rejected[*out.rejection]++ == 0)
+            log().warn("client {}: {}: {}; further ones from this client are counted, not logged",
+                       c.peer, kRejectionNames[*out.rejection], out.detail);
+        ++stats.exceptions;
     }
+    if (const auto& event = out.event) {
+        if (events.size() == kMaxEvents) {
+            log().warn(
+                "event queue full: the owner does not take PLC commands; dropping the oldest");
+            events.pop_front();
+        }
+        if (event->kind == PlcEvent::Kind::kTrigger)
+            log().debug("trigger {} from {}: part {}, recipe slot {}, face {}",
+                        event->trigger.trigger_id, c.peer, event->trigger.part_id,
+                        event->trigger.recipe_slot, static_cast<int>(event->trigger.face));
+        else
+            log().debug("reset from {}", c.peer);
+        events.push_back(*event);
+        events_cv.notify_one();
+    }
+    return std::move(out.response);
 }
 
 void Server::Impl::flush(Client& c) {

@@ -1,0 +1,55 @@
+// Fuzzes io::read_model (PPF model files .hgm, docs/model-file.md).
+//
+// Input: one flag byte, then the file. The file ends in a checksum that random edits would
+// almost never match, so when the flag's bit 0 is set the harness reseals the file as a writer
+// would (body size = bytes between header and checksum, FNV-1a 64 over the rest) and mutations
+// reach the body's counts and the model's validation; with bit 0 clear the file is taken as is.
+//
+// Asserts: no crash, sanitizer report or exception; no allocation beyond -malloc_limit_mb (a
+// count larger than the file must be an error, not a huge vector); an error names the file; a
+// model it accepts is valid, write_model accepts it and writes back the same bytes (the format's
+// bit-exact round trip).
+#include <fstream>
+#include <iterator>
+#include <vector>
+
+#include "fuzz_util.hpp"
+#include "hotgauge/io/checksum.hpp"
+#include "hotgauge/io/model_io.hpp"
+
+using namespace hotgauge;
+
+namespace {
+
+constexpr std::size_t kHeader = 8 + 4 + 8;  // magic, version, body size
+constexpr std::size_t kChecksum = 8;
+
+void put_le64(std::uint8_t* p, std::uint64_t v) {
+    for (int i = 0; i < 8; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+    if (size == 0) return 0;
+    std::vector<std::uint8_t> file(data + 1, data + size);
+    if ((data[0] & 1) && file.size() >= kHeader + kChecksum) {
+        const std::size_t end = file.size() - kChecksum;
+        put_le64(file.data() + 12, end - kHeader);
+        put_le64(file.data() + end, io::fnv1a64(file.data(), end));
+    }
+    const auto path = fuzz::input_file("model", "in.hgm", file.data(), file.size());
+    auto m = fuzz::no_throw("read_model", [&] { return io::read_model(path); });
+    if (!m) {
+        fuzz::check_error_names(m.error(), path);
+        return 0;
+    }
+    fuzz::check(m->validate().ok(), "read_model returned an invalid model");
+    const auto out = fuzz::scratch_dir("model") / "out.hgm";
+    auto written = fuzz::no_throw("write_model", [&] { return io::write_model(*m, out); });
+    fuzz::check(written.ok(), "write_model refused a model read_model accepted");
+    std::ifstream in(out, std::ios::binary);
+    const std::vector<std::uint8_t> back{std::istreambuf_iterator<char>(in), {}};
+    fuzz::check(back == file, "write_model wrote other bytes than the file read");
+    return 0;
+}

@@ -1,0 +1,102 @@
+// Fuzzes io::read_recording (recording format v1, a folder of YAML and .npy files).
+//
+// Input: a small container, so that one input is a whole recording and mutations reach the deep
+// checks: pieces separated by the line "%%hotgauge%%" (kSep below). Piece 0 is part.yaml; pieces
+// 1-6 are face folder a's face.yaml, profiles.npy, profile_times.npy, profile_positions.npy,
+// accel.npy, accel_times.npy, and pieces 7-12 the same for face b (further pieces are ignored).
+// A piece that is absent (fewer separators) is a missing file, an empty piece an empty file.
+// The seeds (make_seeds.py) list faces [a] or [a, b].
+//
+// Asserts: no crash, sanitizer report or exception; an error names a file under the folder; a
+// recording it accepts is accepted by write_recording (the writer refuses only what the reader
+// rejects) and reads back identical.
+#include <cstring>
+#include <string_view>
+#include <vector>
+
+#include "fuzz_util.hpp"
+#include "hotgauge/io/recording_io.hpp"
+
+using namespace hotgauge;
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr std::string_view kSep = "\n%%hotgauge%%\n";
+constexpr const char* kFaceFiles[] = {"face.yaml",         "profiles.npy",
+                                      "profile_times.npy", "profile_positions.npy",
+                                      "accel.npy",         "accel_times.npy"};
+
+std::vector<std::string_view> split(std::string_view in) {
+    std::vector<std::string_view> pieces;
+    for (;;) {
+        const auto at = in.find(kSep);
+        pieces.push_back(in.substr(0, at));
+        if (at == std::string_view::npos) return pieces;
+        in.remove_prefix(at + kSep.size());
+    }
+}
+
+template <class T>
+bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {  // NaN payloads included
+    return a.size() == b.size() &&
+           (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+bool same_face(const core::FaceScan& a, const core::FaceScan& b) {
+    return a.name == b.name && a.T_world_camera.matrix() == b.T_world_camera.matrix() &&
+           a.scan_direction == b.scan_direction && a.R_camera_accel == b.R_camera_accel &&
+           a.travel_scale == b.travel_scale && a.clock_offset_ns == b.clock_offset_ns &&
+           a.width == b.width && same_bytes(a.profiles_mm, b.profiles_mm) &&
+           a.profile_times_ns == b.profile_times_ns &&
+           same_bytes(a.profile_positions_mm, b.profile_positions_mm) &&
+           same_bytes(a.accel_mps2, b.accel_mps2) && a.accel_times_ns == b.accel_times_ns;
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+    const fs::path& scratch = fuzz::scratch_dir("recording");
+    const fs::path dir = scratch / "in";
+    static const bool made = [&] {
+        for (const char* face : {"a", "b"}) fs::create_directories(dir / face);
+        return true;
+    }();
+    (void)made;
+
+    const auto pieces = split({reinterpret_cast<const char*>(data), size});
+    std::vector<fs::path> slots = {dir / "part.yaml"};
+    for (const char* face : {"a", "b"})
+        for (const char* file : kFaceFiles) slots.push_back(dir / face / file);
+    for (std::size_t i = 0; i < slots.size(); ++i) {
+        if (i < pieces.size())
+            fuzz::write_file(slots[i], reinterpret_cast<const std::uint8_t*>(pieces[i].data()),
+                             pieces[i].size());
+        else
+            ::unlink(slots[i].c_str());
+    }
+
+    auto rec = fuzz::no_throw("read_recording", [&] { return io::read_recording(dir); });
+    if (!rec) {
+        fuzz::check_error_names(rec.error(), dir);
+        return 0;
+    }
+    fuzz::check(!rec->faces.empty(), "a recording without faces was accepted");
+
+    const fs::path copy = scratch / "copy";
+    auto written =
+        fuzz::no_throw("write_recording", [&] { return io::write_recording(*rec, copy); });
+    fuzz::check(written.ok(), "write_recording refused a recording read_recording accepted: " +
+                                  (written ? std::string() : written.error().message));
+    auto again = fuzz::no_throw("read_recording", [&] { return io::read_recording(copy); });
+    fuzz::check(again.ok(), "read_recording refused what write_recording wrote: " +
+                                (again ? std::string() : again.error().message));
+    bool same =
+        again->part_id == rec->part_id && again->recipe == rec->recipe &&
+        again->captured_at == rec->captured_at && again->temperature_c == rec->temperature_c &&
+        again->faces.size() == rec->faces.size() && again->warnings.size() == rec->warnings.size();
+    for (std::size_t i = 0; same && i < rec->faces.size(); ++i)
+        same = same_face(rec->faces[i], again->faces[i]);
+    fuzz::check(same, "the recording changed in a write_recording + read_recording round trip");
+    return 0;
+}
