@@ -118,6 +118,10 @@ core::Result<std::unique_ptr<Camera>> Camera::open(const CameraConfig& c) {
     };
     if (const auto why = take_control(impl->camera, c.control_wait_ms); !why.empty())
         return core::make_error(impl->name + ": " + why);
+    // An acquisition a crashed process left running would carry on into our first scan: the
+    // frames (and on a moving axis the scan itself) would start before our AcquisitionStart.
+    arv_camera_stop_acquisition(impl->camera, &e);
+    g_clear_error(&e);
     ArvDevice* device = arv_camera_get_device(impl->camera);
     impl->lost_handler =
         g_signal_connect(device, "control-lost", G_CALLBACK(+[](ArvDevice*, gpointer flag) {
@@ -206,6 +210,24 @@ void Camera::stop() {
     arv_camera_stop_acquisition(impl_->camera, &e);
     g_clear_error(&e);
     impl_->streaming = false;
+}
+
+bool Camera::in_control() const {
+    if (lost()) return false;
+    if (!arv_camera_is_gv_device(impl_->camera)) return true;
+    // GigE Vision's control channel privilege register: a device that restarted (power, a
+    // firmware reset) has forgotten us, though Aravis's heartbeat may not have noticed yet.
+    constexpr guint64 kControlChannelPrivilege = 0x0A00;
+    constexpr guint32 kControlOrExclusive = 0x3;
+    guint32 value = 0;
+    GError* e = nullptr;
+    arv_device_read_register(arv_camera_get_device(impl_->camera), kControlChannelPrivilege, &value,
+                             &e);
+    if (e) {
+        g_clear_error(&e);
+        return false;
+    }
+    return (value & kControlOrExclusive) != 0;
 }
 
 bool Camera::lost() const {

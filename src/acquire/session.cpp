@@ -62,9 +62,10 @@ void CameraSession::lose(const std::string& why) {
 }
 
 core::Result<void> CameraSession::connect() {
-    if (camera_ && camera_->lost()) {
-        // It died between scans (power cycled, cable pulled, restarted): close it and open it
-        // again at once; the backoff is for attempts that fail.
+    if (camera_ && !camera_->in_control()) {
+        // It died between scans (power cycled, cable pulled, restarted: it no longer knows us,
+        // though the heartbeat may not have noticed yet): close it and open it again at once;
+        // the backoff is for attempts that fail.
         lose("lost between scans");
         next_attempt_ = Clock::now();
     }

@@ -84,6 +84,9 @@ class Camera {
     core::Result<void> software_trigger();
     core::Result<void> set_exposure_us(double exposure_us);
     bool lost() const;
+    // Asks the device (one register read): false when lost, or when a GigE Vision device no
+    // longer grants us its control channel (it restarted). Between scans only.
+    bool in_control() const;
     const StreamStats& stats() const { return stats_; }
     std::string description() const;  // vendor, model, serial, address
 
