@@ -643,7 +643,9 @@ def judge(rec, lines_by_id):
                        f"reasons {reasons[:2]}")
         if final["verdict"] == "OK":
             out.append("accelerometer outage: plain OK")
-    elif faults & set(ACCEL_LOSS):
+    elif faults & (set(ACCEL_LOSS) | {"cam_restart", "cam_packet_loss"}):
+        # The virtual cell is the camera and the accelerometer's sender in one process: its
+        # restart is also a hole in the accelerometer stream, rightly flagged as one.
         if flagged and not accel_reasons_only(reasons):
             out.append(f"accelerometer loss flagged with other reasons: {reasons[:2]}")
     elif flagged:
