@@ -107,6 +107,17 @@ def main():
             plc.to_idle()
             plc.trigger(500 + k)
 
+        def kill_cell():
+            line.cell.proc.kill()
+            line.cell.proc.wait()
+            line.procs.remove(line.cell)
+
+        def start_cell_again(name):
+            """The virtual cell started again (its log under `name`); the conveyor on it."""
+            line.cell.name = name
+            line.start_cell()
+            return vl.Conveyor(line.axis_port)
+
         def files_intact():
             now = jsonl(line)
             assert now[:len(kept)] == kept, "an earlier result changed or vanished"
@@ -194,9 +205,7 @@ def main():
         start_part(n)
         time.sleep(1.5)  # inside the first face's scan
         assert plc.state() == vl.BUSY
-        line.cell.proc.kill()
-        line.cell.proc.wait()
-        line.procs.remove(line.cell)
+        kill_cell()
         conveyor.close()
         r = vl.decode(plc.wait_state({vl.DONE, vl.FAULT}, 30))
         print(f"   PLC: state {r['state']} error {r['error']}")
@@ -205,9 +214,7 @@ def main():
         files_intact()
         assert kept[-1]["part"]["part_id"] == str(500 + n), "the failed part has its row"
         assert kept[-1]["part"]["verdict"] == "NOT_MEASURED"
-        line.cell.name = "virtual-cell-killed"
-        line.start_cell()
-        conveyor = vl.Conveyor(line.axis_port)
+        conveyor = start_cell_again("virtual-cell-killed")
         p = part()
         assert p["verdict"] == "OK", p
         files_intact()
@@ -217,12 +224,8 @@ def main():
         # noticed yet: the control register says the camera no longer knows us (the soak saw
         # FAULT 203 in 4 of 11 such restarts, then a part scanned from a stale acquisition).
         conveyor.close()
-        line.cell.proc.kill()
-        line.cell.proc.wait()
-        line.procs.remove(line.cell)
-        line.cell.name = "virtual-cell-restarted"
-        line.start_cell()
-        conveyor = vl.Conveyor(line.axis_port)
+        kill_cell()
+        conveyor = start_cell_again("virtual-cell-restarted")
         p = part()
         assert p["verdict"] == "OK", p
         files_intact()

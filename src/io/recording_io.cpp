@@ -332,12 +332,14 @@ Result<FaceScan> read_face(const fs::path& root, const std::string& name) {
                           " entries, expected " + std::to_string(acc->shape[0]) +
                           " (one per sample in accel.npy)");
     f.width = prof->shape[1];
-    for (auto ok : {read_into(dir, "profiles.npy", *prof, f.profiles_mm),
-                    read_into(dir, "profile_times.npy", *pt, f.profile_times_ns),
-                    read_into(dir, "profile_positions.npy", *pp, f.profile_positions_mm),
-                    read_into(dir, "accel.npy", *acc, f.accel_mps2),
-                    read_into(dir, "accel_times.npy", *at, f.accel_times_ns)})
-        if (!ok) return ok.error();
+    // One after the other: the first file that cannot be read ends it.
+    if (auto ok = read_into(dir, "profiles.npy", *prof, f.profiles_mm); !ok) return ok.error();
+    if (auto ok = read_into(dir, "profile_times.npy", *pt, f.profile_times_ns); !ok)
+        return ok.error();
+    if (auto ok = read_into(dir, "profile_positions.npy", *pp, f.profile_positions_mm); !ok)
+        return ok.error();
+    if (auto ok = read_into(dir, "accel.npy", *acc, f.accel_mps2); !ok) return ok.error();
+    if (auto ok = read_into(dir, "accel_times.npy", *at, f.accel_times_ns); !ok) return ok.error();
     // A point is a pair of finite numbers; ±Inf is no more a point than NaN is.
     for (float& v : f.profiles_mm)
         if (!std::isfinite(v)) v = std::numeric_limits<float>::quiet_NaN();
