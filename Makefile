@@ -1,8 +1,9 @@
 # hotgauge — the two commands of the README, and what they need.
 #   make demo   install missing packages, build, run 12 hub-a parts through the virtual line
-#   make test   install missing packages, build (incl. sanitizer and fuzz builds), run every test
-#               and each fuzz harness briefly
-#   make fuzz   build the fuzz harnesses and run each for FUZZ_SECONDS (tests/fuzz/README.md)
+#   make test   install missing packages, build (release and sanitizer builds), run every test,
+#               the fuzz harnesses' corpus replay among them (ctest fuzz_replay_*)
+#   make fuzz   build the libFuzzer harnesses (clang) and run each for FUZZ_SECONDS
+#               (tests/fuzz/README.md)
 SHELL := /bin/bash
 BUILD ?= build
 BUILD_ASAN ?= build-asan
@@ -16,15 +17,23 @@ DEB_PACKAGES := build-essential cmake pkg-config clang-format \
   libeigen3-dev libpcl-dev libopencv-dev libopencv-contrib-dev libflann-dev \
   libaravis-dev aravis-tools libmodbus-dev mbpoll socat libsystemd-dev systemd \
   libyaml-cpp-dev libspdlog-dev libcli11-dev nlohmann-json3-dev libembree-dev \
-  libgtest-dev libgmock-dev libbenchmark-dev clang-14 libfuzzer-14-dev \
+  libgtest-dev libgmock-dev libbenchmark-dev \
   python3-numpy python3-yaml python3-pymodbus python3-serial-asyncio
+# Only for make fuzz / fuzz-brief (libFuzzer needs clang).
+FUZZ_PACKAGES := clang-14 libfuzzer-14-dev
 
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: deps build build-asan build-fuzz demo test fuzz fuzz-brief bench format clean soak
+.PHONY: deps deps-fuzz install-missing build build-asan build-fuzz demo test fuzz fuzz-brief bench format clean soak
 
 deps:
-	@missing=$$(for p in $(DEB_PACKAGES); do \
+	@$(MAKE) -s install-missing PACKAGES="$(DEB_PACKAGES)"
+
+deps-fuzz: deps
+	@$(MAKE) -s install-missing PACKAGES="$(FUZZ_PACKAGES)"
+
+install-missing:
+	@missing=$$(for p in $(PACKAGES); do \
 	    dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q 'install ok installed' || echo $$p; \
 	  done); \
 	if [ -n "$$missing" ]; then \
@@ -33,17 +42,24 @@ deps:
 	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
 	else echo "all packages present"; fi
 
+# -g1 (line tables: file:line in stack traces, profiles and core dumps, no variables) instead
+# of RelWithDebInfo's -g: a quarter less compile time for make test. A full -g build for gdb:
+#   cmake -S . -B build-gdb -DCMAKE_BUILD_TYPE=RelWithDebInfo
 $(BUILD)/CMakeCache.txt:
-	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG"
 
 build: deps $(BUILD)/CMakeCache.txt
 	cmake --build $(BUILD) -j $(JOBS)
 
+# The sanitizer build: only what `ctest -L unit` runs (target hotgauge_unit_tests), with line
+# tables (-g1) for the sanitizers' stacks; full -g made it 30 % slower to build.
 $(BUILD_ASAN)/CMakeCache.txt:
-	cmake -S . -B $(BUILD_ASAN) -DCMAKE_BUILD_TYPE=Debug -DHOTGAUGE_SANITIZE=ON -DHOTGAUGE_BENCH=OFF
+	cmake -S . -B $(BUILD_ASAN) -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG=-g1 \
+	  -DHOTGAUGE_SANITIZE=ON -DHOTGAUGE_BENCH=OFF
 
 build-asan: deps $(BUILD_ASAN)/CMakeCache.txt
-	cmake --build $(BUILD_ASAN) -j $(JOBS)
+	cmake --build $(BUILD_ASAN) -j $(JOBS) --target hotgauge_unit_tests
 
 # libFuzzer harnesses (tests/fuzz/): clang, every library instrumented; only the harnesses and
 # what they link are built.
@@ -51,14 +67,15 @@ $(BUILD_FUZZ)/CMakeCache.txt:
 	CC=clang-14 CXX=clang++-14 cmake -S . -B $(BUILD_FUZZ) -DHOTGAUGE_FUZZ=ON \
 	  -DHOTGAUGE_TESTS=OFF -DHOTGAUGE_BENCH=OFF
 
-build-fuzz: deps $(BUILD_FUZZ)/CMakeCache.txt
+build-fuzz: deps-fuzz $(BUILD_FUZZ)/CMakeCache.txt
 	cmake --build $(BUILD_FUZZ) -j $(JOBS) --target hotgauge_fuzzers
 
 # Each harness for FUZZ_SECONDS on a scratch copy of its seeds; findings in $(BUILD_FUZZ)/fuzz-findings.
 fuzz: build-fuzz
 	tests/fuzz/run.sh $(BUILD_FUZZ) $(FUZZ_SECONDS)
 
-# make test's step: each harness for FUZZ_BRIEF_SECONDS, so that a regression is caught.
+# Each libFuzzer harness for FUZZ_BRIEF_SECONDS. make test replays the corpora instead (ctest
+# fuzz_replay_*: each file and 250 damaged variants, under ASan/UBSan), without a clang build.
 fuzz-brief: build-fuzz
 	tests/fuzz/run.sh $(BUILD_FUZZ) $(FUZZ_BRIEF_SECONDS)
 
@@ -75,17 +92,20 @@ demo: build
 # a seeded schedule (accelerometer loss and outage, camera packet loss and restarts, PLC
 # disconnects, a full results disk, SIGHUP with a bad and a good config, kill -9 of hotgauged
 # with a supervisor that restarts it like systemd), then the report: parts in, results out, lost,
-# duplicated, false NOK, faults by code, RSS over time, cycle time. About 11 s a part.
+# duplicated, false NOK, faults by code, RSS over time, cycle time. About 11 s a part; a line
+# uses a third of a core, so SOAK_LINES independent lines share the parts out (seeds SOAK_SEED,
+# SOAK_SEED+1, ...; one folder each under SOAK_OUT): 1000 parts on three lines take about 70 min.
 SOAK_PARTS ?= 1000
 SOAK_SEED ?= 1
+SOAK_LINES ?= 3
 SOAK_OUT ?= out/soak
 soak: build
-	/usr/bin/python3 tests/soak.py --bin-dir $(BUILD) --parts $(SOAK_PARTS) --seed $(SOAK_SEED) --out $(SOAK_OUT)
+	/usr/bin/python3 tests/soak.py --bin-dir $(BUILD) --parts $(SOAK_PARTS) --seed $(SOAK_SEED) \
+	  --lines $(SOAK_LINES) --out $(SOAK_OUT)
 
-test: build build-asan build-fuzz
+test: build build-asan
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
 	cd $(BUILD_ASAN) && ctest --output-on-failure -j $(JOBS) -L unit
-	tests/fuzz/run.sh $(BUILD_FUZZ) $(FUZZ_BRIEF_SECONDS)
 
 bench: build
 	cmake --build $(BUILD) -j $(JOBS) --target hotgauge_bench_match

@@ -231,6 +231,28 @@ TEST(AccelRing, GapsLeaveWithTheirSamples) {
     EXPECT_EQ(ring.stats().gaps, 1u);
 }
 
+// The daemon asks before each scan whether the margin before it is whole. A stream that came
+// back 10 ms ago is arriving, not silent: the CI saw a part triggered right after the sensor head
+// restarted scanned at once, its first 0.44 s untrusted (issue 18).
+TEST(AccelRing, HistoryBeforeAScanTellsArrivingFromSilent) {
+    constexpr std::int64_t kMargin = 500 * kMs, kInFlight = 30 * kMs, kSilent = 130 * kMs;
+    const auto state = [&](const AccelRing& r, std::int64_t now) {
+        return history_before(r, now, kMargin, kInFlight, kSilent);
+    };
+    AccelRing ring(ring_1khz(10.0));
+    EXPECT_EQ(state(ring, 1000 * kMs), HistoryState::silent);  // nothing ever came
+    for (std::int64_t k = 0; k <= 2000; ++k) ring.push(sample_at(k * kMs));
+    EXPECT_EQ(state(ring, 2000 * kMs), HistoryState::complete);
+    EXPECT_EQ(state(ring, 2200 * kMs), HistoryState::silent);  // 200 ms without a sample
+    // The sender restarts 3 s later: 10 ms of new samples; the margin spans the hole.
+    for (std::int64_t k = 5000; k <= 5010; ++k) ring.push(sample_at(k * kMs));
+    EXPECT_EQ(state(ring, 5010 * kMs), HistoryState::arriving);
+    for (std::int64_t k = 5011; k <= 5400; ++k) ring.push(sample_at(k * kMs));
+    EXPECT_EQ(state(ring, 5400 * kMs), HistoryState::arriving);  // 0.4 s of 0.5 s
+    for (std::int64_t k = 5401; k <= 5600; ++k) ring.push(sample_at(k * kMs));
+    EXPECT_EQ(state(ring, 5600 * kMs), HistoryState::complete);
+}
+
 TEST(AccelRing, OneWriterManyReaders) {
     AccelRing ring(ring_1khz(1.0));  // 1000 samples, overwritten many times
     constexpr std::int64_t kN = 20000;

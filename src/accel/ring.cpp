@@ -137,4 +137,13 @@ bool AccelRing::wait_for(std::int64_t t_ns, std::chrono::milliseconds timeout) c
     return pushed_.wait_for(lock, timeout, [&] { return size_ > 0 && at(size_ - 1).t_ns >= t_ns; });
 }
 
+HistoryState history_before(const AccelRing& ring, std::int64_t now_ns, std::int64_t margin_ns,
+                            std::int64_t in_flight_ns, std::int64_t silent_ns) {
+    const std::optional<std::int64_t> newest = ring.stats().newest_ns;
+    if (!newest || *newest < now_ns - silent_ns) return HistoryState::silent;
+    const std::int64_t t = now_ns - in_flight_ns;
+    return ring.copy_range(t - margin_ns, t).complete() ? HistoryState::complete
+                                                        : HistoryState::arriving;
+}
+
 }  // namespace hotgauge::accel

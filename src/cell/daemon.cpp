@@ -1,5 +1,6 @@
 #include "hotgauge/cell/daemon.hpp"
 
+#include <malloc.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -450,15 +451,17 @@ void Daemon::Impl::prepare_acquisition(const std::shared_ptr<const Setup>& s) {
 
 void Daemon::Impl::await_accel_history(double margin_s) const {
     // The record before a scan must be whole too, and the stream may have just started or come
-    // back after an outage. A stream that is silent is not waited for: the part is measured
-    // without it (degraded).
+    // back after an outage (a restarted sensor head: its first samples are only milliseconds
+    // old). A stream that is silent is not waited for: the part is measured without it
+    // (degraded).
     constexpr std::int64_t kInFlightNs = 30'000'000;  // the newest samples may be on their way
+    constexpr std::int64_t kSilentNs = 130'000'000;   // no sample for this long: silent
     const auto margin_ns = static_cast<std::int64_t>(margin_s * 1e9);
     const auto deadline = Clock::now() + std::chrono::duration<double>(margin_s + 0.5);
     while (Clock::now() < deadline) {
-        const std::int64_t t = core::realtime_ns() - kInFlightNs;
-        if (ring->copy_range(t - 100'000'000, t).samples.empty()) return;  // silent
-        if (ring->copy_range(t - margin_ns, t).complete()) return;
+        if (accel::history_before(*ring, core::realtime_ns(), margin_ns, kInFlightNs, kSilentNs) !=
+            accel::HistoryState::arriving)
+            return;
         std::this_thread::sleep_for(milliseconds(20));
     }
 }
@@ -641,6 +644,19 @@ void Daemon::Impl::prepare_results(const std::shared_ptr<const Setup>& s) {
         spdlog::error("raw archive: {}", a.error().message);
 }
 
+namespace {
+
+// glibc keeps what a part freed (its profiles, clouds and archive buffers: hundreds of MB) for
+// reuse, so the idle RSS swung 60–260 MB from part to part in the soak, which would hide a
+// leak. Given back after each part, the idle RSS is what the daemon holds.
+void release_freed_memory() {
+#if defined(__GLIBC__)
+    malloc_trim(0);
+#endif
+}
+
+}  // namespace
+
 void Daemon::Impl::processing_loop() {
     while (!workers_stop || captured.size() > 0) {
         proc_beat = steady_ns();
@@ -649,6 +665,7 @@ void Daemon::Impl::processing_loop() {
         process(std::move(*c));
         proc_beat = steady_ns();
         --in_flight;
+        release_freed_memory();
     }
 }
 

@@ -122,4 +122,13 @@ class AccelRing {
     bool warned_non_monotonic_ = false;
 };
 
+// Before a scan, the record of the last `margin_ns` must be whole. Is it (complete), will it be
+// if the reader waits (arriving: a stream that has just started or come back is still filling
+// the margin), or has the stream gone silent (no sample in the last `silent_ns`), so that waiting
+// is pointless? Samples younger than `in_flight_ns` may still be on their way and are not asked
+// for.
+enum class HistoryState { complete, arriving, silent };
+HistoryState history_before(const AccelRing& ring, std::int64_t now_ns, std::int64_t margin_ns,
+                            std::int64_t in_flight_ns, std::int64_t silent_ns);
+
 }  // namespace hotgauge::accel
