@@ -565,6 +565,12 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
     sc.clock_offset_ns = s.calibration.clock_offset_ns;
     session->set_scan_config(sc);
     acq_beat = steady_ns();
+    // The camera first: reopening one that restarted takes about half a second, and the
+    // accelerometer's record is to be judged right before the acquisition starts (a sensor head
+    // restarted with the camera resumes its stream meanwhile; judged before the reopen, it was
+    // still silent and the scan began 69 ms after the stream came back: degraded).
+    if (auto ok = session->connect(); !ok)
+        return Failure{plc::ErrorCode::kDeviceLost, "face " + name + ": " + ok.error().message};
     if (accel) await_accel_history(margin_s);
     auto out = session->scan(s.config.acquisition.scan_s, exposure_temperature);
     acq_beat = steady_ns();

@@ -38,10 +38,13 @@ for h in "${harnesses[@]}"; do
     cp "$here/corpus/$h/"* "$scratch/$h/"
     dict=()
     [ -f "$here/$h.dict" ] && dict=(-dict="$here/$h.dict")
+    # <harness>.args: that harness's own libFuzzer flags (e.g. fuzz_modbus's -max_len).
+    own=()
+    [ -f "$here/$h.args" ] && read -r -a own < "$here/$h.args"
     # -timeout: an input that takes 10 s is a hang; -rss_limit_mb/-malloc_limit_mb: a reader must
     # not need more than this for a file of a few kilobytes.
     "$bin" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=512 \
-        -print_final_stats=1 -artifact_prefix="$findings/$h/" "${dict[@]}" ${FUZZ_ARGS:-} \
+        -print_final_stats=1 -artifact_prefix="$findings/$h/" "${dict[@]}" "${own[@]}" ${FUZZ_ARGS:-} \
         "$scratch/$h" >"$logs/$h.log" 2>&1
     rc=$?
     runs=$(grep -h 'stat::number_of_executed_units' "$logs/$h.log" | awk '{s += $2} END {print s + 0}')
