@@ -939,11 +939,11 @@ def run_lines(a):
         parts = a.parts // a.lines + (1 if i < a.parts % a.lines else 0)
         folder = os.path.join(out, f"line{i + 1}")
         address = ".".join(a.address.split(".")[:3] + [str(int(a.address.split(".")[3]) + i)])
-        cmd = [sys.executable, os.path.abspath(__file__), "--bin-dir", a.bin_dir,
-               "--parts", str(parts), "--seed", str(a.seed + i), "--out", folder,
-               "--address", address, "--first-part-id", str(a.first_part_id + i * 1_000_000),
-               "--every", str(a.every), "--first-fault", str(a.first_fault),
-               "--max-error-mm", str(a.max_error_mm)]
+        # Every option as given, but for what makes this line its own.
+        own = dict(vars(a), lines=1, parts=parts, seed=a.seed + i, out=folder, address=address,
+                   first_part_id=a.first_part_id + i * 1_000_000)
+        cmd = [sys.executable, os.path.abspath(__file__)] + [
+            x for k, v in own.items() for x in (f"--{k.replace('_', '-')}", str(v))]
         os.makedirs(folder, exist_ok=True)
         log = open(os.path.join(out, f"line{i + 1}.log"), "w")
         children.append((folder, log, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)))
