@@ -338,6 +338,58 @@ TEST(CameraSession, LostCameraFailsTheScanAndIsReopenedWithBackoff) {
     EXPECT_EQ(session.failures_in_a_row(), 0);
 }
 
+// Finding 8 of issue 18: positions count from a scan's first frame, so a scan whose first frames
+// were lost is shifted; the session must say so. Lost on a fresh stream, only the first frame's
+// lateness tells; lost later, the block ids too.
+TEST(CameraSession, AScanThatLostItsFirstFramesSaysSo) {
+    const auto tri = vcell::sensor_triangulation(sensor());
+    ASSERT_TRUE(tri.ok());
+    acquire::ScanConfig scan;
+    scan.stripe.max_value = 255;
+    auto cc = camera_config();
+    cc.width = 2048;
+    acquire::CameraSession session(cc, scan, *tri);
+    Stamped stamped;
+    vcell::GvDeviceConfig c;
+    c.address = kAddress;
+    c.serial = "HG-TEST";
+    c.lose_scan_start = 5;  // 50 ms at 100 frames/s
+    c.lose_scan_start_count = 2;
+    auto device = vcell::GvDevice::start(
+        c, [&stamped](const vcell::FrameRequest& r, std::span<std::uint8_t> d) { stamped(r, d); });
+    ASSERT_TRUE(device.ok()) << device.error().message;
+    for (int k = 0; k < 3; ++k) {
+        auto out = session.scan(0.3, std::nullopt);
+        ASSERT_TRUE(out.ok()) << out.error().message;
+        EXPECT_GT(out->face.n_profiles(), 10);
+        std::printf("scan %d: %lld profiles, first frame %.1f ms after start, %lld lost: %s\n", k,
+                    static_cast<long long>(out->face.n_profiles()),
+                    static_cast<double>(out->start.lag_ns) * 1e-6,
+                    static_cast<long long>(out->start.lost), out->start_lost.c_str());
+        if (k < 2) {
+            EXPECT_FALSE(out->start_lost.empty()) << "scan " << k;
+            EXPECT_TRUE(out->start.lost > 0 || out->start.lag_ns > 50'000'000) << out->start_lost;
+        } else {
+            EXPECT_EQ(out->start_lost, "") << "scan " << k;
+            EXPECT_EQ(out->start.lost, 0);
+            EXPECT_LT(out->start.lag_ns, 40'000'000);
+        }
+    }
+    EXPECT_EQ((*device)->stats().start_frames_lost, 10u);
+}
+
+TEST(CameraSession, TheStartRuleNamesWhatWasLost) {
+    const std::int64_t ms = 1'000'000;
+    EXPECT_EQ(acquire::scan_start_lost({8 * ms, 0}, 10 * ms, 30 * ms), "");
+    EXPECT_EQ(acquire::scan_start_lost({40 * ms, 0}, 10 * ms, 30 * ms), "");
+    const std::string late = acquire::scan_start_lost({41 * ms, 0}, 10 * ms, 30 * ms);
+    EXPECT_NE(late.find("first frame 41 ms after AcquisitionStart"), std::string::npos) << late;
+    const std::string lost = acquire::scan_start_lost({5 * ms, 2}, 10 * ms, 30 * ms);
+    EXPECT_NE(lost.find("2 incomplete frames before the first complete one"), std::string::npos)
+        << lost;
+    EXPECT_EQ(acquire::scan_start_lost({900 * ms, 0}, 0, 30 * ms), "");  // one frame: no period
+}
+
 TEST(ExposureTable, InterpolatesClampsAndNamesBadPoints) {
     auto t = acquire::ExposureTable::create({{700, 200}, {1000, 100}});
     ASSERT_TRUE(t.ok());

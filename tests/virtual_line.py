@@ -291,7 +291,8 @@ class Line:
                 "--line-rate", "1000", "--accel-to", accel_to, "--axis-port", str(self.axis_port),
                 "--truth-dir", self.truth_dir, "--pyrometer-device", self.pyrometer_sim_dev] + \
                (["--true-calibration", self.true_calibration] if self.true_calibration else []) + \
-               [a for n in self.master_parts for a in ("--master-part", str(n))]
+               [a for n in self.master_parts for a in ("--master-part", str(n))] + \
+               list(getattr(self, "cell_extra", []))
 
     def start_cell(self, accel_to=None):
         self.accel_to = accel_to or getattr(self, "accel_to", f"127.0.0.1:{self.accel_port}")

@@ -81,6 +81,11 @@ struct Camera::Impl {
     gulong lost_handler = 0;
     bool streaming = false;
     int consecutive_timeouts = 0;
+    // The acquisition's start: when AcquisitionStart was sent, whether a complete frame has
+    // come since. (Aravis's missing-frame count is no evidence here: block ids may skip across
+    // a stop and a start, a frame aborted by the stop having used one.)
+    std::int64_t start_sent_ns = 0;
+    bool complete_seen = false;
 
     ~Impl() {
         if (streaming && camera) {
@@ -192,6 +197,9 @@ core::Result<void> Camera::start() {
     while (ArvBuffer* b = arv_stream_try_pop_buffer(impl_->stream))
         arv_stream_push_buffer(impl_->stream, b);
     GError* e = nullptr;
+    start_ = {};
+    impl_->complete_seen = false;
+    impl_->start_sent_ns = core::realtime_ns();
     arv_camera_start_acquisition(impl_->camera, &e);
     if (e) return core::make_error(impl_->name + ": cannot start acquisition: " + take(e));
     impl_->streaming = true;
@@ -262,9 +270,26 @@ core::Result<Frame> Camera::next() {
                                     std::to_string(impl_->config.timeout_ms) + " ms");
         }
         impl_->consecutive_timeouts = 0;
-        if (arv_buffer_get_status(b) != ARV_BUFFER_STATUS_SUCCESS) {
-            ++stats_.incomplete;
+        // Aravis stamps a buffer with the host time of its frame's first packet. One that began
+        // before our AcquisitionStart was on its way when the last acquisition stopped: it
+        // belongs to that one (another scan, and it would anchor this scan's positions).
+        const auto first_packet_ns = static_cast<std::int64_t>(arv_buffer_get_system_timestamp(b));
+        if (first_packet_ns > 0 && first_packet_ns < impl_->start_sent_ns) {
+            ++stats_.stale;
             arv_stream_push_buffer(impl_->stream, b);
+            continue;
+        }
+        if (start_.lag_ns < 0)
+            start_.lag_ns = (first_packet_ns > 0 ? first_packet_ns : core::realtime_ns()) -
+                            impl_->start_sent_ns;
+        // An incomplete buffer is counted, handed back and never returned.
+        auto skip = [&] {
+            ++stats_.incomplete;
+            if (!impl_->complete_seen) ++start_.lost;
+            arv_stream_push_buffer(impl_->stream, b);
+        };
+        if (arv_buffer_get_status(b) != ARV_BUFFER_STATUS_SUCCESS) {
+            skip();
             continue;
         }
         Frame f;
@@ -275,10 +300,10 @@ core::Result<Frame> Camera::next() {
                 f.frame_id = arv_buffer_get_frame_id(b);
                 arv_stream_push_buffer(impl_->stream, b);
                 ++stats_.frames;
+                impl_->complete_seen = true;
                 return f;
             }
-            ++stats_.incomplete;
-            arv_stream_push_buffer(impl_->stream, b);
+            skip();
             continue;
         }
         f.system_ns = core::realtime_ns();
@@ -292,12 +317,12 @@ core::Result<Frame> Camera::next() {
         const auto expected = static_cast<size_t>(f.width) * static_cast<size_t>(f.height) *
                               static_cast<size_t>(f.bytes_per_pixel);
         if (!data || size < expected) {
-            ++stats_.incomplete;
-            arv_stream_push_buffer(impl_->stream, b);
+            skip();
             continue;
         }
         f.data.assign(data, data + expected);
         arv_stream_push_buffer(impl_->stream, b);
+        impl_->complete_seen = true;
         ++stats_.frames;
         return f;
     }

@@ -31,6 +31,19 @@ double ExposureTable::exposure_us(double t) const {
     return lo->second + f * (hi->second - lo->second);
 }
 
+std::string scan_start_lost(const AcquisitionStart& start, std::int64_t period_ns,
+                            std::int64_t latency_ns) {
+    auto ms = [](std::int64_t ns) {
+        return std::to_string(std::llround(static_cast<double>(ns) * 1e-6));
+    };
+    if (start.lost > 0)
+        return std::to_string(start.lost) + " incomplete frames before the first complete one";
+    if (period_ns > 0 && start.lag_ns > period_ns + latency_ns)
+        return "first frame " + ms(start.lag_ns) + " ms after AcquisitionStart (frame period " +
+               ms(period_ns) + " ms, start latency allowed " + ms(latency_ns) + " ms)";
+    return {};
+}
+
 CameraSession::CameraSession(CameraConfig camera, ScanConfig scan, Triangulation triangulation,
                              ExposureTable exposure, ReconnectPolicy policy)
     : camera_config_(std::move(camera)),
@@ -80,6 +93,8 @@ core::Result<void> CameraSession::connect() {
     }
     camera_ = std::move(*cam);
     failures_ = 0;
+    if (ever_opened_) ++reopens_;
+    ever_opened_ = true;
     return {};
 }
 
@@ -105,9 +120,14 @@ core::Result<ScanOutcome> CameraSession::scan(double seconds, std::optional<doub
     // A scan whose last wait saw no frame ended with the camera gone or stalled: it fails, as
     // one that lost the camera earlier does; a part of a scan is never passed on as the scan.
     std::string last_error;
+    std::int64_t previous_ns = -1, period_ns = 0;  // the shortest step between frames
     while (Clock::now() < t_end) {
         auto frame = camera_->next();
         if (frame) {
+            const std::int64_t step = frame->camera_ns - previous_ns;
+            if (previous_ns >= 0 && step > 0 && (period_ns == 0 || step < period_ns))
+                period_ns = step;
+            previous_ns = frame->camera_ns;
             builder.add(*frame);
             last_error.clear();
             continue;
@@ -118,6 +138,9 @@ core::Result<ScanOutcome> CameraSession::scan(double seconds, std::optional<doub
     camera_->stop();
     out.scan = builder.stats();
     out.stream = camera_->stats();
+    out.start = camera_->acquisition_start();
+    out.start_lost = scan_start_lost(out.start, period_ns,
+                                     std::int64_t{camera_config_.start_latency_ms} * 1'000'000);
     if (!last_error.empty()) {
         const std::string why = "scan failed after " + std::to_string(out.scan.frames) +
                                 " frames: camera lost or stalled: " + last_error;

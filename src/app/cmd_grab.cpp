@@ -171,6 +171,16 @@ int run(GrabArgs a) {
         spdlog::error("{}", outcome.error().message);
         return 1;
     }
+    // Positions count from the first frame. A camera's own start latency is measured here at
+    // commissioning (camera.start_latency_ms); a scan that lost its start is written, flagged.
+    spdlog::info("first frame {:.1f} ms after AcquisitionStart",
+                 static_cast<double>(outcome->start.lag_ns) * 1e-6);
+    if (!outcome->start_lost.empty())
+        spdlog::warn(
+            "the scan may have lost its start ({}): its positions would then be shifted "
+            "along the scan; grab again, or, if this camera always starts this late, "
+            "raise camera.start_latency_ms",
+            outcome->start_lost);
     if (outcome->exposure_us)
         spdlog::info("exposure {:.1f} µs for {:.0f} °C (table)", *outcome->exposure_us,
                      *a.temperature_c);

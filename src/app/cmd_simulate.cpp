@@ -311,6 +311,14 @@ Command add_simulate(CLI::App& app) {
     s->add_option("--packet-loss", a->vc.device.packet_loss,
                   "serve: fraction of GVSP packets the link drops (resend recovers them)")
         ->capture_default_str();
+    s->add_option("--lose-scan-start", a->vc.device.lose_scan_start,
+                  "serve: fault: the first N frames of each acquisition are never sent")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    s->add_option("--lose-scan-start-count", a->vc.device.lose_scan_start_count,
+                  "serve: ... only in the first K acquisitions (0: in every one)")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
     s->add_option("--axis-port", a->vc.axis_port,
                   "serve: the robot/axis controller's Modbus TCP port (0: any, -1: none)")
         ->capture_default_str();

@@ -60,6 +60,7 @@ void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a)
                   "timeout_ms",
                   "max_timeouts",
                   "control_wait_ms",
+                  "start_latency_ms",
                   "features",
                   "scan_s",
                   "speed_mm_s",
@@ -96,6 +97,7 @@ void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a)
     cam.timeout_ms = integer_in(y, c, w, "timeout_ms", 1, 600000, cam.timeout_ms);
     cam.max_timeouts = integer_in(y, c, w, "max_timeouts", 1, 1000, cam.max_timeouts);
     cam.control_wait_ms = integer_in(y, c, w, "control_wait_ms", 0, 60000, cam.control_wait_ms);
+    cam.start_latency_ms = integer_in(y, c, w, "start_latency_ms", 0, 10000, cam.start_latency_ms);
     if (const YAML::Node f = c["features"]) {  // an ordered list of [NAME, VALUE]
         if (!f.IsSequence()) y.fail(f, w + ".features: expected a list of [NAME, VALUE]");
         for (std::size_t i = 0; i < f.size(); ++i) {

@@ -302,8 +302,9 @@ struct Daemon::Impl {
     void acquisition_loop();
     Captured acquire_part(Job job);
     std::optional<Failure> scan_face(const Setup& s, const std::string& name, double margin_s,
-                                     std::optional<double> exposure_temperature,
-                                     core::Recording& rec);
+                                     std::optional<double> exposure_temperature, Captured& c);
+    std::optional<Failure> move_to_face(const Setup& s, const std::string& name, double margin_s,
+                                        const core::Recording& rec);
     void read_part_temperature(Captured& c) const;
     void attach_accelerometer(Captured& c, double margin_s) const;
     void refresh_last_face(Captured& c, std::int64_t until_ns, double timeout_s) const;
@@ -507,11 +508,12 @@ Captured Daemon::Impl::acquire_part(Job next) {
                              stop ? "daemon stopping (SIGTERM)" : "cycle reset by the PLC"};
             break;
         }
-        failed = scan_face(s, name, margin_s, exposure_temperature, c.rec);
+        failed = scan_face(s, name, margin_s, exposure_temperature, c);
         if (failed) break;
     }
     if (!failed && c.rec.faces.empty())
-        failed = Failure{plc::ErrorCode::kMeasurementFailed, "no face to scan"};
+        failed = Failure{plc::ErrorCode::kMeasurementFailed,
+                         c.degraded.empty() ? "no face to scan" : "no face left: " + c.degraded[0]};
     if (failed) {
         c.fault = code(failed->code);
         c.failure = failed->why;
@@ -526,36 +528,44 @@ Captured Daemon::Impl::acquire_part(Job next) {
     return c;
 }
 
+// The axis to the face's start; its jolt kept out of the accelerometer's record of the face
+// before and of this one.
+std::optional<Failure> Daemon::Impl::move_to_face(const Setup& s, const std::string& name,
+                                                  double margin_s, const core::Recording& rec) {
+    if (!axis) return std::nullopt;
+    const auto pos = s.config.axis.faces.find(name);
+    if (pos == s.config.axis.faces.end())
+        return Failure{plc::ErrorCode::kMeasurementFailed,
+                       "axis: no position for face '" + name + "' in the config"};
+    // The accelerometer's record of the last face runs a margin past its scan; the move's
+    // jolt must stay out of it, and out of the next face's record before it.
+    if (accel && !rec.faces.empty()) {
+        const std::int64_t t_free =
+            rec.faces.back().profile_times_ns.back() + static_cast<std::int64_t>(margin_s * 1e9);
+        if (t_free > core::realtime_ns())
+            std::this_thread::sleep_for(std::chrono::nanoseconds(t_free - core::realtime_ns()));
+    }
+    auto moved = axis->move_to(pos->second);
+    // An axis that answers but does not arrive in time is a timeout (204); one that is gone
+    // or faulted is a lost device (203).
+    if (!moved)
+        return Failure{axis->timed_out() ? plc::ErrorCode::kTimeout : plc::ErrorCode::kDeviceLost,
+                       moved.error().message};
+    if (accel && *moved) std::this_thread::sleep_for(std::chrono::duration<double>(margin_s));
+    return std::nullopt;
+}
+
+// One face into c.rec. A scan that lost its first frames is shifted along the scan (positions
+// count from the first frame): it is scanned once more; lost again, the face is left out with
+// the reason, so its features are not measured rather than measured shifted.
 std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string& name,
                                                double margin_s,
                                                std::optional<double> exposure_temperature,
-                                               core::Recording& rec) {
+                                               Captured& c) {
     const calib::FaceGeometry* face = s.calibration.face(name);
     if (!face)
         return Failure{plc::ErrorCode::kMeasurementFailed,
                        "no face '" + name + "' in the calibration"};
-    if (axis) {
-        const auto pos = s.config.axis.faces.find(name);
-        if (pos == s.config.axis.faces.end())
-            return Failure{plc::ErrorCode::kMeasurementFailed,
-                           "axis: no position for face '" + name + "' in the config"};
-        // The accelerometer's record of the last face runs a margin past its scan; the move's
-        // jolt must stay out of it, and out of the next face's record before it.
-        if (accel && !rec.faces.empty()) {
-            const std::int64_t t_free = rec.faces.back().profile_times_ns.back() +
-                                        static_cast<std::int64_t>(margin_s * 1e9);
-            if (t_free > core::realtime_ns())
-                std::this_thread::sleep_for(std::chrono::nanoseconds(t_free - core::realtime_ns()));
-        }
-        auto moved = axis->move_to(pos->second);
-        // An axis that answers but does not arrive in time is a timeout (204); one that is gone
-        // or faulted is a lost device (203).
-        if (!moved)
-            return Failure{
-                axis->timed_out() ? plc::ErrorCode::kTimeout : plc::ErrorCode::kDeviceLost,
-                moved.error().message};
-        if (accel && *moved) std::this_thread::sleep_for(std::chrono::duration<double>(margin_s));
-    }
     acquire::ScanConfig sc = s.config.acquisition.scan;
     sc.face = name;
     sc.T_world_camera = face->T_world_camera;
@@ -564,27 +574,49 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
     sc.speed_mm_s *= face->travel_scale;  // the true travel per commanded mm, as calibrated
     sc.clock_offset_ns = s.calibration.clock_offset_ns;
     session->set_scan_config(sc);
-    acq_beat = steady_ns();
-    // The camera first: reopening one that restarted takes about half a second, and the
-    // accelerometer's record is to be judged right before the acquisition starts (a sensor head
-    // restarted with the camera resumes its stream meanwhile; judged before the reopen, it was
-    // still silent and the scan began 69 ms after the stream came back: degraded).
-    if (auto ok = session->connect(); !ok)
-        return Failure{plc::ErrorCode::kDeviceLost, "face " + name + ": " + ok.error().message};
-    if (accel) await_accel_history(margin_s);
-    auto out = session->scan(s.config.acquisition.scan_s, exposure_temperature);
-    acq_beat = steady_ns();
-    if (!out)
-        return Failure{plc::ErrorCode::kDeviceLost, "face " + name + ": " + out.error().message};
-    out->face.travel_scale = face->travel_scale;  // applied above: a recalibration replaces it
-    out->face.clock_offset_ns = sc.clock_offset_ns;
-    rec.faces.push_back(std::move(out->face));
+    std::string start_lost;
+    for (int attempt = 1; attempt <= 2; ++attempt) {
+        if (auto failed = move_to_face(s, name, margin_s, c.rec)) return failed;
+        acq_beat = steady_ns();
+        // The camera first: reopening one that restarted takes about half a second, and the
+        // accelerometer's record is to be judged right before the acquisition starts (a sensor
+        // head restarted with the camera resumes its stream meanwhile; judged before the reopen,
+        // it was still silent and the scan began 69 ms after the stream came back: degraded).
+        const int reopens = session->reopens();
+        if (auto ok = session->connect(); !ok)
+            return Failure{plc::ErrorCode::kDeviceLost, "face " + name + ": " + ok.error().message};
+        if (session->reopens() != reopens)
+            spdlog::info("camera {}: reopened (lost: {})", s.config.acquisition.camera.id,
+                         session->last_failure());
+        if (accel) await_accel_history(margin_s);
+        auto out = session->scan(s.config.acquisition.scan_s, exposure_temperature);
+        acq_beat = steady_ns();
+        if (!out)
+            return Failure{plc::ErrorCode::kDeviceLost,
+                           "face " + name + ": " + out.error().message};
+        if (out->start_lost.empty()) {
+            out->face.travel_scale =
+                face->travel_scale;  // applied above: a recalibration replaces it
+            out->face.clock_offset_ns = sc.clock_offset_ns;
+            c.rec.faces.push_back(std::move(out->face));
+            return std::nullopt;
+        }
+        start_lost = out->start_lost;
+        spdlog::warn("part {} face {}: the scan lost its start ({}); {}", c.rec.part_id, name,
+                     start_lost, attempt == 1 ? "scanning it again" : "face left out");
+    }
+    c.degraded.push_back("face " + name + " not measured: its scan lost its start twice (" +
+                         start_lost + ")");
     return std::nullopt;
 }
 
+// A reading that is not valid right after the scans gets until the accelerometer's margin past
+// the last profile, which processing waits for anyway: a sensor that missed its polls for about a
+// second just then (the soak saw one, 1.0 s) does not cost the part its temperature.
 void Daemon::Impl::read_part_temperature(Captured& c) const {
     if (!pyrometer) return;
-    const plc::PyrometerReading t = pyrometer->latest();
+    const plc::PyrometerReading t =
+        pyrometer->wait_valid(std::chrono::milliseconds(static_cast<long long>(c.margin_s * 1e3)));
     if (t.valid()) {
         c.rec.temperature_c = t.temperature_c;
         return;

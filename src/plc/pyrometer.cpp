@@ -192,6 +192,16 @@ PyrometerReading Pyrometer::latest() const {
     return r;
 }
 
+PyrometerReading Pyrometer::wait_valid(std::chrono::milliseconds within) const {
+    const auto until = Clock::now() + within;
+    PyrometerReading r = latest();
+    while (!r.valid() && Clock::now() < until) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        r = latest();
+    }
+    return r;
+}
+
 struct PyrometerSimulator::Impl {
     modbus_t* ctx = nullptr;
     modbus_mapping_t* mapping = nullptr;

@@ -221,6 +221,10 @@ struct GvDevice::Impl {
     std::thread control, stream;
     std::atomic<bool> stop{false};
 
+    // AcquisitionStart commands received: a stop and a start between two frames are still a new
+    // acquisition (its frame 0 starts the axis again). Written and read under camera_mutex.
+    std::uint64_t acquisition_starts = 0;
+
     // Control thread only.
     bool has_controller = false;
     sockaddr_in controller{};
@@ -284,8 +288,10 @@ void GvDevice::Impl::handle(const std::uint8_t* packet, std::size_t size, const 
     std::vector<std::uint8_t> ack;
     std::lock_guard camera_lock(camera_mutex);
     // Control channel privilege: the controller keeps it while it talks within the heartbeat
-    // timeout; others may read but not write.
-    const std::int64_t now_us = real_time_us();
+    // timeout; others may read but not write. Its age on the monotonic clock: a step of the
+    // wall clock (a VM resumed, NTP) is no silence of the controller's.
+    const std::int64_t now_us = g_get_monotonic_time();
+    const bool acquiring_before = arv_fake_camera_get_acquisition_status(camera) != 0;
     bool write_access = true;
     if (has_controller) {
         const auto timeout_ms = arv_fake_camera_get_heartbeat_timeout(camera);
@@ -377,6 +383,8 @@ void GvDevice::Impl::handle(const std::uint8_t* packet, std::size_t size, const 
         default:
             ack = ack_header(kStatusNotImplemented, static_cast<std::uint16_t>(command + 1), 0, id);
     }
+    if (!acquiring_before && arv_fake_camera_get_acquisition_status(camera) != 0)
+        ++acquisition_starts;
     // The first to take the privilege becomes the controller; giving it up ends that.
     const bool privileged = arv_fake_camera_get_control_channel_privilege(camera) != 0;
     if (!has_controller && privileged) {
@@ -439,15 +447,18 @@ void GvDevice::Impl::run_stream() {
     std::int64_t frame_in_acquisition = 0;
     std::uint32_t frame_id = 0;
     bool streaming_before = false;
+    std::uint64_t starts_seen = 0;
     std::int64_t next_us = 0;  // this frame's time, µs
     while (!stop) {
         guint64 aligned_us = 0;  // the fake camera's next frame time on its period grid
         std::int64_t period_us = 0;
-        bool streaming = false;
+        bool streaming = false, restarted = false;
         {
             std::lock_guard lock(camera_mutex);
             streaming = arv_fake_camera_get_control_channel_privilege(camera) != 0 &&
                         arv_fake_camera_get_acquisition_status(camera) != 0;
+            restarted = starts_seen != acquisition_starts;
+            starts_seen = acquisition_starts;
             if (streaming) {
                 arv_fake_camera_get_sleep_time_for_next_frame(camera, &aligned_us);
                 std::uint32_t p = 0;
@@ -464,7 +475,7 @@ void GvDevice::Impl::run_stream() {
         // Frames follow each other at the period from the first one, like exposures of a
         // camera. One rendered late goes out late with its own timestamp (a camera's frame
         // buffer); only when a second behind does the device skip ahead, and count it.
-        if (!streaming_before) {
+        if (!streaming_before || restarted) {
             ++acquisition;
             frame_in_acquisition = 0;
             streaming_before = true;
@@ -489,7 +500,11 @@ void GvDevice::Impl::run_stream() {
         std::uint32_t packet_size = 0;
         {
             std::lock_guard lock(camera_mutex);
-            if (arv_fake_camera_get_acquisition_status(camera) == 0) continue;
+            // Stopped, or stopped and started again while this frame waited: not sent; a new
+            // acquisition begins with the next turn.
+            if (arv_fake_camera_get_acquisition_status(camera) == 0 ||
+                starts_seen != acquisition_starts)
+                continue;
             const bool fire = arv_fake_camera_is_in_free_running_mode(camera) ||
                               (arv_fake_camera_is_in_software_trigger_mode(camera) &&
                                arv_fake_camera_check_and_acknowledge_software_trigger(camera));
@@ -526,6 +541,23 @@ void GvDevice::Impl::run_stream() {
                         static_cast<std::size_t>(std::max(1, req.bytes_per_pixel)),
                     0);
         if (renderer) renderer(req, data);
+        {
+            // Stopped, or stopped and started again, while it was rendered: dropped, as a
+            // camera drops the frame in progress (it belongs to no acquisition now).
+            std::lock_guard lock(camera_mutex);
+            if (arv_fake_camera_get_acquisition_status(camera) == 0 ||
+                starts_seen != acquisition_starts)
+                continue;
+        }
+        const bool lose_start =
+            req.frame_in_acquisition < config.lose_scan_start &&
+            (config.lose_scan_start_count == 0 ||
+             acquisition <= static_cast<std::uint64_t>(config.lose_scan_start_count));
+        if (lose_start) {
+            std::lock_guard lock(stats_mutex);
+            ++stats.start_frames_lost;
+            continue;
+        }
         send_frame(req, packet_size, data, loss_rng);
     }
 }
@@ -584,6 +616,8 @@ core::Result<std::unique_ptr<GvDevice>> GvDevice::start(const GvDeviceConfig& co
     impl->where = "virtual camera " + config.serial + " at " + config.address;
     if (config.packet_loss < 0 || config.packet_loss >= 1)
         return core::make_error(impl->where + ": packet loss must be in [0, 1)");
+    if (config.lose_scan_start < 0 || config.lose_scan_start_count < 0)
+        return core::make_error(impl->where + ": lose_scan_start and its count must be >= 0");
     in_addr address{};
     if (::inet_pton(AF_INET, config.address.c_str(), &address) != 1)
         return core::make_error(impl->where + ": not an IPv4 address");
@@ -626,6 +660,12 @@ core::Result<std::unique_ptr<GvDevice>> GvDevice::start(const GvDeviceConfig& co
     impl->stream = std::thread([raw] { raw->run_stream(); });
     detail::log().info("{}: GVCP {}:{} up (packet loss {:.2f} %)", impl->where, config.address,
                        kGvcpPort, 100.0 * config.packet_loss);
+    if (config.lose_scan_start > 0)
+        detail::log().warn("{}: fault injected: the first {} frames of {} acquisitions are lost",
+                           impl->where, config.lose_scan_start,
+                           config.lose_scan_start_count == 0
+                               ? std::string("all")
+                               : "the first " + std::to_string(config.lose_scan_start_count));
     return std::unique_ptr<GvDevice>(new GvDevice(std::move(impl)));
 }
 

@@ -32,6 +32,9 @@ struct CameraConfig {
     // GigE Vision: another application holds the control channel (a crashed process, until its
     // heartbeat expires, 3 s by default): try to take it for this long before giving up.
     int control_wait_ms = 5000;
+    // The first frame's first packet arrives within one frame period plus this after
+    // AcquisitionStart; later, its first frames were lost (see AcquisitionStart).
+    int start_latency_ms = 30;
 };
 
 // What the stream delivered; never silently zero-filled.
@@ -39,10 +42,21 @@ struct StreamStats {
     std::int64_t frames = 0;      // complete buffers handed out
     std::int64_t incomplete = 0;  // buffers with missing packets or another error status
     std::int64_t timeouts = 0;    // waits that saw no buffer
+    std::int64_t stale = 0;       // buffers of the acquisition before (begun before its start)
     std::uint64_t completed = 0, failures = 0, underruns = 0;  // Aravis stream statistics
     // GigE Vision streams: frames the receiver saw no packet of, packets missing after resend,
     // packets asked for again and packets received again.
     std::uint64_t missing_frames = 0, missing_packets = 0, resend_requests = 0, resent_packets = 0;
+};
+
+// How the last acquisition began. A scan's positions count from its first frame (the axis starts
+// with it), so a scan whose first frames were lost is shifted along the scan: whoever uses the
+// scan must know. Frames lost later only leave a gap, their neighbours keep their positions.
+struct AcquisitionStart {
+    // AcquisitionStart sent → the first buffer's first packet received (host clock); -1: none.
+    std::int64_t lag_ns = -1;
+    // Incomplete buffers before the first complete one. (Frames lost whole show in lag_ns.)
+    std::int64_t lost = 0;
 };
 
 // One part of a multi-part buffer (GigE Vision 2.1: range and intensity of a 3D sensor as
@@ -88,6 +102,7 @@ class Camera {
     // longer grants us its control channel (it restarted). Between scans only.
     bool in_control() const;
     const StreamStats& stats() const { return stats_; }
+    const AcquisitionStart& acquisition_start() const { return start_; }
     std::string description() const;  // vendor, model, serial, address
 
   private:
@@ -95,6 +110,7 @@ class Camera {
     explicit Camera(std::unique_ptr<Impl> impl);
     std::unique_ptr<Impl> impl_;
     StreamStats stats_;
+    AcquisitionStart start_;
 };
 
 }  // namespace hotgauge::acquire

@@ -49,7 +49,16 @@ struct ScanOutcome {
     StreamStats stream;
     std::optional<double> exposure_us;  // set from the table for this scan
     std::string camera;                 // description of the camera that scanned
+    AcquisitionStart start;             // how the acquisition began
+    // Not empty: the scan's first frames were lost, so its positions are shifted; why.
+    std::string start_lost;
 };
+
+// Why a scan's start was lost (its positions shifted), or "" when its first frame followed
+// AcquisitionStart within one frame period plus `latency_ns` and nothing was lost before it.
+// `period_ns` ≤ 0: unknown (a one-frame scan), only the counted losses decide.
+std::string scan_start_lost(const AcquisitionStart& start, std::int64_t period_ns,
+                            std::int64_t latency_ns);
 
 // Thread safety: one thread drives a session.
 class CameraSession {
@@ -75,6 +84,10 @@ class CameraSession {
     const ScanConfig& scan_config() const { return scan_config_; }
     bool connected() const { return camera_ != nullptr; }
     int failures_in_a_row() const { return failures_; }
+    // Opens after a loss so far, and why the last one was lost ("lost between scans", the
+    // scan's error): the daemon logs each reopen.
+    int reopens() const { return reopens_; }
+    const std::string& last_failure() const { return last_failure_; }
     // Time until the next open attempt is allowed (0 when allowed now).
     std::chrono::milliseconds backoff_remaining() const;
 
@@ -92,6 +105,8 @@ class CameraSession {
     // destruction.
     std::thread reaper_;
     int failures_ = 0;
+    int reopens_ = 0;
+    bool ever_opened_ = false;
     Clock::time_point next_attempt_{};
     std::string last_failure_;
 };

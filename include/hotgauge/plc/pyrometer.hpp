@@ -58,6 +58,9 @@ class Pyrometer {
     Pyrometer& operator=(const Pyrometer&) = delete;
 
     PyrometerReading latest() const;
+    // The latest reading once it is valid, waiting at most `within` for the poller to get one
+    // (a sensor that missed a few polls); the latest reading, invalid, when it does not.
+    PyrometerReading wait_valid(std::chrono::milliseconds within) const;
 
   private:
     struct Impl;

@@ -44,12 +44,18 @@ struct GvDeviceConfig {
     // parts (range, intensity, ... as 3D sensors send them); the renderer writes them one after
     // the other.
     int multipart_parts = 0;
+    // A fault to inject: the first `lose_scan_start` frames of an acquisition are not sent (the
+    // axis starts with frame 0 all the same), in the first `lose_scan_start_count` acquisitions,
+    // 0 = in every one. A receiver sees a scan whose start is missing.
+    int lose_scan_start = 0;
+    int lose_scan_start_count = 0;
 };
 
 struct GvDeviceStats {
     std::uint64_t frames = 0, packets = 0;
     std::uint64_t skipped = 0;             // frames not rendered: the device fell a second behind
     std::uint64_t dropped = 0;             // first transmissions dropped on purpose
+    std::uint64_t start_frames_lost = 0;   // frames not sent: lose_scan_start
     std::uint64_t resend_requests = 0;     // PACKETRESEND commands received
     std::uint64_t resent = 0;              // packets sent again
     std::uint64_t resend_unavailable = 0;  // asked for packets no longer buffered
