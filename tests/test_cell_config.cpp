@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "hotgauge/cell/config.hpp"
+#include "hotgauge/cell/journal.hpp"
 #include "temp_dir.hpp"
 
 namespace hotgauge {
@@ -160,3 +161,15 @@ TEST(DaemonConfig, AMissingFileIsNamed) {
 
 }  // namespace
 }  // namespace hotgauge
+
+// The journal's VERDICT field is what docs/operations.md tells a QE to filter on
+// (journalctl VERDICT=NOT_MEASURED); it was the first word of the log line ("not").
+TEST(Journal, VerdictFieldIsTheDocumentedName) {
+    using hotgauge::cell::verdict_field;
+    using hotgauge::plc::Verdict;
+    EXPECT_EQ(verdict_field(false, Verdict::kOk), "OK");
+    EXPECT_EQ(verdict_field(false, Verdict::kNok), "NOK");
+    EXPECT_EQ(verdict_field(false, Verdict::kNotMeasured), "NOT_MEASURED");
+    EXPECT_EQ(verdict_field(false, Verdict::kDegraded), "DEGRADED");
+    EXPECT_EQ(verdict_field(true, Verdict::kOk), "FAULT");
+}

@@ -856,8 +856,10 @@ void Daemon::Impl::process(Captured c) {
             << std::lround(store_ms) << " ms)";
     for (const auto& why : r.degraded_reasons) msg << "; degraded: " << why;
     if (stored) msg << "; " << log->last_csv().string();
-    log_part({job.sequence, r.part_id, r.recipe, outcome.substr(0, outcome.find(' ')), msg.str(),
-              problem});
+    log_part({job.sequence, r.part_id, r.recipe,
+              verdict_field(c.fault != 0 || !stored,
+                            to_plc(r, verification ? &*verification : nullptr).overall),
+              msg.str(), problem});
 }
 
 // ---- Daemon --------------------------------------------------------------------------------

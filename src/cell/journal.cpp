@@ -32,6 +32,23 @@ void init_logging(const std::string& identifier) {
     spdlog::set_default_logger(logger);
 }
 
+std::string verdict_field(bool fault, plc::Verdict published) {
+    if (fault) return "FAULT";
+    switch (published) {
+        case plc::Verdict::kOk:
+            return "OK";
+        case plc::Verdict::kNok:
+            return "NOK";
+        case plc::Verdict::kNotMeasured:
+            return "NOT_MEASURED";
+        case plc::Verdict::kDegraded:
+            return "DEGRADED";
+        case plc::Verdict::kNone:
+            break;
+    }
+    return "NONE";
+}
+
 void log_part(const PartRecord& r) {
     if (stderr_is_journal()) {
         sd_journal_send("MESSAGE=%s", r.message.c_str(), "PRIORITY=%d", r.problem ? 4 : 6,

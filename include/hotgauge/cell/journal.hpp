@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <string>
 
+#include "hotgauge/plc/register_map.hpp"
+
 namespace hotgauge::cell {
 
 // True when stderr is the journal's stream (systemd sets $JOURNAL_STREAM to its device:inode).
@@ -20,6 +22,11 @@ struct PartRecord {
     std::string message;   // the human line
     bool problem = false;  // logged as a warning (not measured, fault, degraded)
 };
+
+// The VERDICT field of a part record (docs/operations.md "Logs"): FAULT when the part was not
+// measured by a fault (the PLC saw a fault code), else the published verdict in capitals: OK,
+// NOK, NOT_MEASURED, DEGRADED.
+std::string verdict_field(bool fault, plc::Verdict published);
 
 // One line per part, with the structured fields when journald is the log.
 void log_part(const PartRecord& record);
