@@ -49,6 +49,21 @@ bool copy_parts(ArvBuffer* b, Frame& f) {
     return true;
 }
 
+// A single-part buffer's image into `f`; false when it is not a whole image.
+bool copy_image(ArvBuffer* b, Frame& f) {
+    f.width = arv_buffer_get_image_width(b);
+    f.height = arv_buffer_get_image_height(b);
+    const ArvPixelFormat pf = arv_buffer_get_image_pixel_format(b);
+    f.bytes_per_pixel = static_cast<int>((ARV_PIXEL_FORMAT_BIT_PER_PIXEL(pf) + 7) / 8);
+    size_t size = 0;
+    const auto* data = static_cast<const std::uint8_t*>(arv_buffer_get_data(b, &size));
+    const auto expected = static_cast<size_t>(f.width) * static_cast<size_t>(f.height) *
+                          static_cast<size_t>(f.bytes_per_pixel);
+    if (!data || size < expected) return false;
+    f.data.assign(data, data + expected);
+    return true;
+}
+
 // GigE Vision grants one application the control channel. After a crash the dead process
 // holds it until its heartbeat expires: Aravis then opens the device without control, and
 // every register write is refused (access-denied). Try to take it until `wait_ms` have passed.
@@ -294,33 +309,15 @@ core::Result<Frame> Camera::next() {
         }
         Frame f;
         f.camera_ns = static_cast<std::int64_t>(arv_buffer_get_timestamp(b));
-        if (arv_buffer_get_payload_type(b) == ARV_BUFFER_PAYLOAD_TYPE_MULTIPART) {
-            if (copy_parts(b, f)) {
-                f.system_ns = core::realtime_ns();
-                f.frame_id = arv_buffer_get_frame_id(b);
-                arv_stream_push_buffer(impl_->stream, b);
-                ++stats_.frames;
-                impl_->complete_seen = true;
-                return f;
-            }
+        const bool whole = arv_buffer_get_payload_type(b) == ARV_BUFFER_PAYLOAD_TYPE_MULTIPART
+                               ? copy_parts(b, f)
+                               : copy_image(b, f);
+        if (!whole) {
             skip();
             continue;
         }
         f.system_ns = core::realtime_ns();
         f.frame_id = arv_buffer_get_frame_id(b);
-        f.width = arv_buffer_get_image_width(b);
-        f.height = arv_buffer_get_image_height(b);
-        const ArvPixelFormat pf = arv_buffer_get_image_pixel_format(b);
-        f.bytes_per_pixel = static_cast<int>((ARV_PIXEL_FORMAT_BIT_PER_PIXEL(pf) + 7) / 8);
-        size_t size = 0;
-        const auto* data = static_cast<const std::uint8_t*>(arv_buffer_get_data(b, &size));
-        const auto expected = static_cast<size_t>(f.width) * static_cast<size_t>(f.height) *
-                              static_cast<size_t>(f.bytes_per_pixel);
-        if (!data || size < expected) {
-            skip();
-            continue;
-        }
-        f.data.assign(data, data + expected);
         arv_stream_push_buffer(impl_->stream, b);
         impl_->complete_seen = true;
         ++stats_.frames;
