@@ -704,4 +704,25 @@ TEST(CompensateBadInput, AMasterMeasuredDegradedIsInconclusive) {
         EXPECT_TRUE(f.degraded) << f.name;
         EXPECT_NE(f.reason.find("degraded"), std::string::npos) << f.reason;
     }
+
+    // Not measured (a face left out: its scan lost its start twice) is inconclusive too; only
+    // a trusted value outside its tolerance fails the master (the PLC reads NOK).
+    auto missing = trusted_run;
+    for (auto& f : missing.measurement.features)
+        if (f.name == cert.features[0].name) {
+            f.cold_mm.reset();
+            f.verdict = measure::Verdict::kNotMeasured;
+            f.reason = "face 'top' is not in the recording";
+        }
+    const auto gap = pipeline::verify(missing, cert);
+    ASSERT_TRUE(gap);
+    EXPECT_FALSE(gap->passed);
+    EXPECT_TRUE(gap->inconclusive);
+    auto wrong = missing;
+    for (auto& f : wrong.measurement.features)
+        if (f.name == cert.features[1].name) *f.cold_mm += 2.0;  // outside the 1 mm tolerance
+    const auto failed = pipeline::verify(wrong, cert);
+    ASSERT_TRUE(failed);
+    EXPECT_FALSE(failed->passed);
+    EXPECT_FALSE(failed->inconclusive);
 }

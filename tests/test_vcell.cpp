@@ -340,8 +340,8 @@ TEST(CameraSession, LostCameraFailsTheScanAndIsReopenedWithBackoff) {
 }
 
 // Finding 8 of issue 18: positions count from a scan's first frame, so a scan whose first frames
-// were lost is shifted; the session must say so. Lost on a fresh stream, only the first frame's
-// lateness tells; lost later, the block ids too.
+// were lost is shifted; the session must say so. Frames lost whole show as the first frame's
+// lateness after AcquisitionStart.
 TEST(CameraSession, AScanThatLostItsFirstFramesSaysSo) {
     const auto tri = vcell::sensor_triangulation(sensor());
     ASSERT_TRUE(tri.ok());

@@ -101,6 +101,7 @@ struct Camera::Impl {
     // a stop and a start, a frame aborted by the stop having used one.)
     std::int64_t start_sent_ns = 0;
     bool complete_seen = false;
+    int stale_now = 0;  // buffers of the acquisition before, set aside in this one
 
     ~Impl() {
         if (streaming && camera) {
@@ -214,6 +215,7 @@ core::Result<void> Camera::start() {
     GError* e = nullptr;
     start_ = {};
     impl_->complete_seen = false;
+    impl_->stale_now = 0;
     impl_->start_sent_ns = core::realtime_ns();
     arv_camera_start_acquisition(impl_->camera, &e);
     if (e) return core::make_error(impl_->name + ": cannot start acquisition: " + take(e));
@@ -285,17 +287,23 @@ core::Result<Frame> Camera::next() {
                                     std::to_string(impl_->config.timeout_ms) + " ms");
         }
         impl_->consecutive_timeouts = 0;
-        // Aravis stamps a buffer with the host time of its frame's first packet. One that began
-        // before our AcquisitionStart was on its way when the last acquisition stopped: it
-        // belongs to that one (another scan, and it would anchor this scan's positions).
-        const auto first_packet_ns = static_cast<std::int64_t>(arv_buffer_get_system_timestamp(b));
-        if (first_packet_ns > 0 && first_packet_ns < impl_->start_sent_ns) {
+        // Aravis stamps a buffer with the host time (CLOCK_REALTIME) of its frame's leader. A
+        // complete frame whose leader came before our AcquisitionStart was on its way when the
+        // last acquisition stopped: it belongs to that one (another scan, and it would anchor
+        // this scan's positions). Only before the first frame of ours, and at most a pool's
+        // worth: a wall clock stepped back must not make every frame look old. (An incomplete
+        // buffer's stamp may be an older use's: it counts as lost below.)
+        const bool complete = arv_buffer_get_status(b) == ARV_BUFFER_STATUS_SUCCESS;
+        const auto leader_ns = static_cast<std::int64_t>(arv_buffer_get_system_timestamp(b));
+        if (complete && !impl_->complete_seen && leader_ns > 0 &&
+            leader_ns < impl_->start_sent_ns && impl_->stale_now < impl_->config.n_buffers) {
             ++stats_.stale;
+            ++impl_->stale_now;
             arv_stream_push_buffer(impl_->stream, b);
             continue;
         }
         if (start_.lag_ns < 0)
-            start_.lag_ns = (first_packet_ns > 0 ? first_packet_ns : core::realtime_ns()) -
+            start_.lag_ns = (complete && leader_ns > 0 ? leader_ns : core::realtime_ns()) -
                             impl_->start_sent_ns;
         // An incomplete buffer is counted, handed back and never returned.
         auto skip = [&] {
@@ -303,7 +311,7 @@ core::Result<Frame> Camera::next() {
             if (!impl_->complete_seen) ++start_.lost;
             arv_stream_push_buffer(impl_->stream, b);
         };
-        if (arv_buffer_get_status(b) != ARV_BUFFER_STATUS_SUCCESS) {
+        if (!complete) {
             skip();
             continue;
         }

@@ -139,7 +139,9 @@ core::Result<ScanOutcome> CameraSession::scan(double seconds, std::optional<doub
     out.scan = builder.stats();
     out.stream = camera_->stats();
     out.start = camera_->acquisition_start();
-    out.start_lost = scan_start_lost(out.start, period_ns,
+    // The lag says something only when the camera runs free: a triggered one waits for its
+    // first trigger (an encoder, the PLC), however long that takes.
+    out.start_lost = scan_start_lost(out.start, camera_config_.trigger == "free" ? period_ns : 0,
                                      std::int64_t{camera_config_.start_latency_ms} * 1'000'000);
     if (!last_error.empty()) {
         const std::string why = "scan failed after " + std::to_string(out.scan.frames) +

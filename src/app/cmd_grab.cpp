@@ -223,12 +223,14 @@ int run(GrabArgs a) {
     }
     const auto& times = rec.faces[0].profile_times_ns;
     std::printf(
-        "grabbed %s: %lld frames (%lld incomplete, %lld timeouts, %lld refused), %lld profiles "
+        "grabbed %s: %lld frames (%lld incomplete, %lld timeouts, %lld refused, %lld stale), "
+        "%lld profiles "
         "over %.3f s; points: %lld ok, %lld no return, %lld dark, %lld saturated, %lld double "
         "peak; %s -> %s\n",
         a.scan.face.c_str(), static_cast<long long>(st.frames),
         static_cast<long long>(cs.incomplete), static_cast<long long>(cs.timeouts),
-        static_cast<long long>(st.refused_frames), static_cast<long long>(st.profiles),
+        static_cast<long long>(st.refused_frames), static_cast<long long>(cs.stale),
+        static_cast<long long>(st.profiles),
         static_cast<double>(times.back() - times.front()) * 1e-9, static_cast<long long>(st.ok),
         static_cast<long long>(st.no_return), static_cast<long long>(st.dark),
         static_cast<long long>(st.saturated), static_cast<long long>(st.double_peak),

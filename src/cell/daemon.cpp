@@ -248,6 +248,7 @@ struct Captured {
     double accel_wait_ms = 0;           // from `scanned` until that record was there
     double after_margin_ms = 0;         // the pipeline's work after it (the last face's share)
     std::vector<std::string> degraded;  // found while scanning (temperature unknown, ...)
+    std::vector<std::string> left_out;  // faces whose scans lost their start twice
 };
 
 struct Daemon::Impl {
@@ -576,6 +577,14 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
     session->set_scan_config(sc);
     std::string start_lost;
     for (int attempt = 1; attempt <= 2; ++attempt) {
+        if (attempt == 2) {
+            if (abandoned == c.job.sequence || stop)
+                return Failure{plc::ErrorCode::kMeasurementFailed,
+                               stop ? "daemon stopping (SIGTERM)" : "cycle reset by the PLC"};
+            // The scan before, and its stop, kept out of this one's accelerometer record and
+            // out of its first frame.
+            std::this_thread::sleep_for(std::chrono::duration<double>(margin_s));
+        }
         if (auto failed = move_to_face(s, name, margin_s, c.rec)) return failed;
         acq_beat = steady_ns();
         // The camera first: reopening one that restarted takes about half a second, and the
@@ -586,7 +595,7 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
         if (auto ok = session->connect(); !ok)
             return Failure{plc::ErrorCode::kDeviceLost, "face " + name + ": " + ok.error().message};
         if (session->reopens() != reopens)
-            spdlog::info("camera {}: reopened (lost: {})", s.config.acquisition.camera.id,
+            spdlog::info("camera '{}': reopened (last failure: {})", s.config.acquisition.camera.id,
                          session->last_failure());
         if (accel) await_accel_history(margin_s);
         auto out = session->scan(s.config.acquisition.scan_s, exposure_temperature);
@@ -607,6 +616,7 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
     }
     c.degraded.push_back("face " + name + " not measured: its scan lost its start twice (" +
                          start_lost + ")");
+    c.left_out.push_back(name);
     return std::nullopt;
 }
 
@@ -615,8 +625,14 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
 // second just then (the soak saw one, 1.0 s) does not cost the part its temperature.
 void Daemon::Impl::read_part_temperature(Captured& c) const {
     if (!pyrometer) return;
+    // Not waited for: without an accelerometer nothing waits anyway, and a cold master reads
+    // nothing valid (its certificate's temperature is used).
+    const bool wait = accel && !c.job.setup->masters.contains(c.job.trigger.recipe_slot);
+    const std::int64_t until_ns = c.last_profile_ns + static_cast<std::int64_t>(c.margin_s * 1e9);
+    const auto within = std::chrono::nanoseconds(wait ? until_ns - core::realtime_ns() : 0);
     const plc::PyrometerReading t =
-        pyrometer->wait_valid(std::chrono::milliseconds(static_cast<long long>(c.margin_s * 1e3)));
+        pyrometer->wait_valid(std::chrono::duration_cast<std::chrono::milliseconds>(
+            std::max(within, std::chrono::nanoseconds(0))));
     if (t.valid()) {
         c.rec.temperature_c = t.temperature_c;
         return;
@@ -737,6 +753,12 @@ pipeline::PartResult Daemon::Impl::measure_captured(Captured& c) const {
     }
     const auto t0 = Clock::now();
     r = run.finish();
+    if (!c.left_out.empty()) {  // the pose was found without them: nothing sorts the part
+        std::string faces;
+        for (const auto& f : c.left_out) faces += (faces.empty() ? "" : ", ") + f;
+        measure::degrade_measured(r.measurement, "the pose was found without face " + faces +
+                                                     " (its scans lost their start)");
+    }
     c.after_margin_ms = ms_between(t0, Clock::now());
     if (!accel) r.warnings.push_back("no accelerometer configured: vibration not compensated");
     for (const auto& why : c.degraded) {

@@ -299,4 +299,15 @@ PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& 
     return m.finish();
 }
 
+void degrade_measured(PartMeasurement& m, const std::string& why) {
+    for (auto& f : m.features) {
+        if (f.verdict != Verdict::kOk && f.verdict != Verdict::kNok) continue;
+        const bool outside = f.verdict == Verdict::kNok;
+        f.verdict = Verdict::kDegraded;
+        f.degraded = true;
+        f.reason = "degraded: " + why + (outside ? " (deviation outside tolerance)" : "");
+    }
+    m.verdict = overall(m.features);
+}
+
 }  // namespace hotgauge::measure

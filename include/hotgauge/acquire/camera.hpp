@@ -53,7 +53,7 @@ struct StreamStats {
 // with it), so a scan whose first frames were lost is shifted along the scan: whoever uses the
 // scan must know. Frames lost later only leave a gap, their neighbours keep their positions.
 struct AcquisitionStart {
-    // AcquisitionStart sent → the first buffer's first packet received (host clock); -1: none.
+    // AcquisitionStart sent → the first buffer's leader received (host clock); -1: none.
     std::int64_t lag_ns = -1;
     // Incomplete buffers before the first complete one. (Frames lost whole show in lag_ns.)
     std::int64_t lost = 0;

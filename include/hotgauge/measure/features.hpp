@@ -113,6 +113,10 @@ PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& 
                              const FaceDisplacements& u_world_mm = {},
                              const MeasureConfig& config = {}, const FaceUntrusted& untrusted = {});
 
+// Every measured feature of `m` degraded because of `why` (a face left out, so the pose was
+// found without it): values kept, none sorts the part; the part's verdict again.
+void degrade_measured(PartMeasurement& m, const std::string& why);
+
 }  // namespace hotgauge::measure
 
 namespace hotgauge::measure {
