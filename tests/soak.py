@@ -28,8 +28,9 @@ The schedule (deterministic from --seed): parts 1..--first-fault-1 are clean; fr
 
 Per part: faults, each attempt's PLC state, error, verdict, sequence (input 5) and features,
 its results-file row, cycle time (trigger to DONE/FAULT), daemon RSS (idle before the trigger,
-and right after the part) and every
-feature's error against the simulator's truth. The checks, reported on stdout and in
+once the last part's log line, which follows its archive, is out; and right after the part), the
+wall clock's step against the monotonic one over the part, and every feature's error against the
+simulator's truth. The checks, reported on stdout and in
 OUT/report.json (OUT/parts.jsonl, OUT/rss.csv beside it):
   - no daemon exit but the injected kills (and the final SIGTERM, exit 0);
   - lost: none (every DONE and FAULT has its row, 206 excepted, which has none; every trigger
@@ -46,6 +47,8 @@ OUT/report.json (OUT/parts.jsonl, OUT/rss.csv beside it):
     degraded or not measured;
   - RSS flat: the idle daemon's, median of the last 100 parts within 10 % of parts 100-200
     (N >= 300; a restarted daemon's first parts are in these windows too);
+  - a part during which the wall clock stepped more than 1 s (a virtual machine paused and
+    resumed): its problems are listed as environment events, not failed (a false NOK still is);
 and prints faults by code, verdicts, degraded causes, RSS per daemon lifetime and cycle times.
 Exit status 0 when every check passes.
 """
