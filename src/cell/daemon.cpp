@@ -304,6 +304,12 @@ struct Daemon::Impl {
     Captured acquire_part(Job job);
     std::optional<Failure> scan_face(const Setup& s, const std::string& name, double margin_s,
                                      std::optional<double> exposure_temperature, Captured& c);
+    // The cycle is not to go on: the PLC reset it, or the daemon is stopping.
+    std::optional<Failure> cancelled(const Job& job) const {
+        if (abandoned != job.sequence && !stop) return std::nullopt;
+        return Failure{plc::ErrorCode::kMeasurementFailed,
+                       stop ? "daemon stopping (SIGTERM)" : "cycle reset by the PLC"};
+    }
     std::optional<Failure> move_to_face(const Setup& s, const std::string& name, double margin_s,
                                         const core::Recording& rec);
     void read_part_temperature(Captured& c) const;
@@ -504,11 +510,7 @@ Captured Daemon::Impl::acquire_part(Job next) {
         std::this_thread::sleep_for(wait);
     std::optional<Failure> failed;
     for (const auto& name : job.faces) {
-        if (abandoned == job.sequence || stop) {
-            failed = Failure{plc::ErrorCode::kMeasurementFailed,
-                             stop ? "daemon stopping (SIGTERM)" : "cycle reset by the PLC"};
-            break;
-        }
+        if ((failed = cancelled(job))) break;
         failed = scan_face(s, name, margin_s, exposure_temperature, c);
         if (failed) break;
     }
@@ -578,9 +580,7 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
     std::string start_lost;
     for (int attempt = 1; attempt <= 2; ++attempt) {
         if (attempt == 2) {
-            if (abandoned == c.job.sequence || stop)
-                return Failure{plc::ErrorCode::kMeasurementFailed,
-                               stop ? "daemon stopping (SIGTERM)" : "cycle reset by the PLC"};
+            if (auto no = cancelled(c.job)) return no;
             // The scan before, and its stop, kept out of this one's accelerometer record and
             // out of its first frame.
             std::this_thread::sleep_for(std::chrono::duration<double>(margin_s));
