@@ -21,10 +21,12 @@ DEB_PACKAGES := build-essential cmake pkg-config clang-format \
   python3-numpy python3-yaml python3-pymodbus python3-serial-asyncio
 # Only for make fuzz / fuzz-brief (libFuzzer needs clang).
 FUZZ_PACKAGES := clang-14 libfuzzer-14-dev
+# Only for make oracle-refs: the oracles whose answers are kept in data/oracle.
+ORACLE_PACKAGES := python3-statsmodels
 
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: deps deps-fuzz install-missing build build-asan build-fuzz demo test fuzz fuzz-brief bench format clean soak
+.PHONY: deps deps-fuzz oracle-refs install-missing build build-asan build-fuzz demo test fuzz fuzz-brief bench format clean soak
 
 deps:
 	@$(MAKE) -s install-missing PACKAGES="$(DEB_PACKAGES)"
@@ -41,6 +43,12 @@ install-missing:
 	  $(SUDO) apt-get update -qq && \
 	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
 	else echo "all packages present"; fi
+
+# Reference answers from oracles nobody here wrote, kept in data/oracle and read by the tests
+# (statsmodels' DerSimonian-Laird τ² for measure::between_std); make test does not need them.
+oracle-refs:
+	@$(MAKE) -s install-missing PACKAGES="$(ORACLE_PACKAGES)"
+	/usr/bin/python3 tests/oracle/make_dl_reference.py
 
 # -g1 (line tables: file:line in stack traces, profiles and core dumps, no variables) instead
 # of RelWithDebInfo's -g: a quarter less compile time for make test. A full -g build for gdb:
@@ -114,6 +122,7 @@ bench: build
 	$(BUILD)/tests/bench/hotgauge_bench_acquire
 	$(BUILD)/tests/bench/hotgauge_bench_plc
 	/usr/bin/python3 tests/bench/daemon_latency.py $(BUILD) --parts 5
+	/usr/bin/python3 tests/bench/accel_loss.py $(BUILD) --recordings 4 --loss-seeds 2
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <fstream>
 #include <limits>
+#include <nlohmann/json.hpp>
 #include <numbers>
 #include <random>
 #include <string>
@@ -120,6 +121,42 @@ TEST_P(NistPlane, MatchesReference) {
     EXPECT_EQ(f->n_points, static_cast<std::int64_t>(pts.size()));
 }
 INSTANTIATE_TEST_SUITE_P(All, NistPlane, ::testing::Values("pla7", "pla8", "pla22", "pla26"));
+
+// statsmodels' DerSimonian-Laird τ² (data/oracle/random-effects-dl.json, written by
+// tests/oracle/make_dl_reference.py): between_std is its truncated root.
+TEST(BetweenStd, MatchesStatsmodels) {
+    std::ifstream in(HOTGAUGE_SOURCE_DIR "/data/oracle/random-effects-dl.json");
+    ASSERT_TRUE(in) << "data/oracle/random-effects-dl.json";
+    const auto ref = nlohmann::json::parse(in);
+    ASSERT_GE(ref["cases"].size(), 20u);
+    int positive = 0;
+    for (const auto& c : ref["cases"]) {
+        const auto v = c["values"].get<std::vector<double>>();
+        const auto u = c["u"].get<std::vector<double>>();
+        const double expected = std::sqrt(std::max(0.0, c["tau2"].get<double>()));
+        const auto tau = hm::between_std(v, u);
+        ASSERT_TRUE(tau.ok()) << c["name"] << ": " << tau.error().message;
+        // statsmodels rounds too: it forms Q as Σw·v² − (Σw·v)²/Σw, which loses digits on
+        // values near 40 mm where one u is 1e-4 mm (weight 10⁸): its τ is then up to 4e-6
+        // relative off the exact rational value, ours 1e-13 (checked with Python's Fraction).
+        EXPECT_NEAR(*tau, expected, 1e-12 + 2e-5 * expected) << c["name"];
+        positive += expected > 0;
+    }
+    EXPECT_GE(positive, 10);  // the cases exercise a spread, not only the truncation at 0
+}
+
+TEST(BetweenStd, RefusesWhatItCannotWeigh) {
+    const std::vector<double> one{1.0}, two{1.0, 2.0}, nan{1.0, std::nan("")};
+    EXPECT_FALSE(hm::between_std(one, one).ok());
+    EXPECT_FALSE(hm::between_std(two, one).ok());
+    EXPECT_FALSE(hm::between_std(nan, two).ok());
+    EXPECT_FALSE(hm::between_std(two, std::vector<double>{0.1, -0.1}).ok());
+    // An exact value takes (nearly) all the weight: τ² = (d² − u₂²)/2 for two values d apart,
+    // the variance of two values less what the other's own uncertainty explains.
+    const auto exact = hm::between_std(two, std::vector<double>{0.0, 0.1});
+    ASSERT_TRUE(exact.ok());
+    EXPECT_NEAR(*exact, std::sqrt((1.0 - 0.01) / 2), 1e-6);
+}
 
 class NistCircle3d : public ::testing::TestWithParam<const char*> {};
 

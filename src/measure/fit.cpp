@@ -413,4 +413,29 @@ core::Result<RobustPlaneFit> ransac_plane(std::span<const Eigen::Vector3d> point
     return out;
 }
 
+core::Result<double> between_std(std::span<const double> v, std::span<const double> u) {
+    if (v.size() < 2 || u.size() != v.size())
+        return core::make_error(
+            "between-value spread: need two or more values with one uncertainty each, got " +
+            std::to_string(v.size()) + " and " + std::to_string(u.size()));
+    constexpr double kMinU = 1e-6;
+    double s1 = 0, s2 = 0, swv = 0;
+    std::vector<double> w(v.size());
+    for (std::size_t i = 0; i < v.size(); ++i) {
+        if (!std::isfinite(v[i]) || !std::isfinite(u[i]) || u[i] < 0)
+            return core::make_error("between-value spread: value " + std::to_string(i) +
+                                    " is not finite or has a negative uncertainty");
+        const double ui = std::max(u[i], kMinU);
+        w[i] = 1.0 / (ui * ui);
+        s1 += w[i];
+        s2 += w[i] * w[i];
+        swv += w[i] * v[i];
+    }
+    const double mean = swv / s1;
+    double q = 0;  // Cochran's Q: weighted squares about the weighted mean
+    for (std::size_t i = 0; i < v.size(); ++i) q += w[i] * (v[i] - mean) * (v[i] - mean);
+    const double tau2 = (q - static_cast<double>(v.size() - 1)) / (s1 - s2 / s1);
+    return std::sqrt(std::max(0.0, tau2));
+}
+
 }  // namespace hotgauge::measure

@@ -335,6 +335,7 @@ std::string to_json(const PartResult& r) {
         fj["u_mm"] = measured ? json(f.u_mm) : json();
         fj["u_cold_mm"] = opt(f.u_cold_mm);
         fj["sector_spread_mm"] = opt(f.sector_spread_mm);
+        fj["sector_between_mm"] = opt(f.sector_between_mm);
         fj["n_sectors"] = f.n_sectors;
         if (f.kind == core::FeatureKind::kDiameter && measured) fj["arc_deg"] = f.arc_deg;
         add_method(f, fj);

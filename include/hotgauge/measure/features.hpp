@@ -76,8 +76,9 @@ struct FeatureResult {
     // when it could not be measured without them, used and the feature degraded.
     std::vector<std::string> left_out;
     bool degraded = false;
-    std::optional<double> hot_mm;     // as measured at the part temperature
-    std::optional<double> cold_mm;    // hot / (1 + α(T)·(T − 20)); needs the temperature
+    std::string degraded_because;   // why a degraded value is not vouched for; empty: see left_out
+    std::optional<double> hot_mm;   // as measured at the part temperature
+    std::optional<double> cold_mm;  // hot / (1 + α(T)·(T − 20)); needs the temperature
     std::optional<double> u_cold_mm;  // cold_mm's standard uncertainty: u_mm and the pyrometer's
     double nominal_mm = 0, tol_lower_mm = 0, tol_upper_mm = 0;
     std::optional<double> deviation_mm;  // cold − nominal
@@ -86,6 +87,9 @@ struct FeatureResult {
     double u_mm = 0;  // standard uncertainty of hot_mm: the budget's terms in quadrature
     std::vector<std::pair<std::string, double>> u_budget;  // term name, standard uncertainty
     std::optional<double> sector_spread_mm;  // std of the sector values (multiple sampling)
+    // Heights from silhouette edges: the sector values' spread beyond each sector's own
+    // uncertainty (random effects, τ); the "sectors" term is then τ/√n_sectors.
+    std::optional<double> sector_between_mm;
     int n_sectors = 0;
     double arc_deg = 0;  // diameters: angular coverage of the edge points
     std::string method;  // "edge circle", "planes", "plane and edge", "edges" (empty: none)

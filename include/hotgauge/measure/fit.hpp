@@ -78,4 +78,11 @@ struct RansacOptions {
 core::Result<RobustPlaneFit> ransac_plane(std::span<const Eigen::Vector3d> points,
                                           const RansacOptions& options = {});
 
+// Between-value standard deviation τ of values v with standard uncertainties u: the spread the
+// values show beyond their own uncertainties, 0 when they agree within them (DerSimonian & Laird
+// 1986, the random-effects moment estimator; checked against statsmodels, data/oracle). An
+// uncertainty below 1e-6 counts as 1e-6: an exact value takes most of the weight, not all of it.
+// Error: fewer than two values, sizes differ, a non-finite value or a negative uncertainty.
+core::Result<double> between_std(std::span<const double> v, std::span<const double> u);
+
 }  // namespace hotgauge::measure
