@@ -16,7 +16,7 @@ JOBS ?= $(shell nproc)
 DEB_PACKAGES := build-essential cmake pkg-config clang-format \
   libeigen3-dev libpcl-dev libopencv-dev libopencv-contrib-dev libflann-dev \
   libaravis-dev aravis-tools libmodbus-dev mbpoll socat libsystemd-dev systemd \
-  libyaml-cpp-dev libspdlog-dev libcli11-dev nlohmann-json3-dev libembree-dev \
+  libyaml-cpp-dev libspdlog-dev libcli11-dev nlohmann-json3-dev libembree-dev libboost-dev \
   libgtest-dev libgmock-dev libbenchmark-dev \
   python3-numpy python3-yaml python3-pymodbus python3-serial-asyncio
 # Only for make fuzz / fuzz-brief (libFuzzer needs clang).
@@ -45,10 +45,13 @@ install-missing:
 	else echo "all packages present"; fi
 
 # Reference answers from oracles nobody here wrote, kept in data/oracle and read by the tests
-# (statsmodels' DerSimonian-Laird τ² for measure::between_std); make test does not need them.
+# (statsmodels' DerSimonian-Laird τ² for measure::between_std; NumPy and statsmodels for the
+# quality statistics: capability, control limits, type-1 and type-3 studies); make test does not
+# need them.
 oracle-refs:
 	@$(MAKE) -s install-missing PACKAGES="$(ORACLE_PACKAGES)"
 	/usr/bin/python3 tests/oracle/make_dl_reference.py
+	/usr/bin/python3 tests/oracle/make_quality_reference.py
 
 # -g1 (line tables: file:line in stack traces, profiles and core dumps, no variables) instead
 # of RelWithDebInfo's -g: a quarter less compile time for make test. A full -g build for gdb:
