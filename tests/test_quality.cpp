@@ -7,9 +7,11 @@
 #include <fstream>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <string>
 #include <vector>
 
+#include "hotgauge/quality/drift.hpp"
 #include "hotgauge/quality/statistics.hpp"
 
 using namespace hotgauge;
@@ -114,4 +116,87 @@ TEST(QualityBadInput, StudiesRefuseWhatTheyCannotJudge) {
     says(quality::type3_study({two, two}, 0.0), "tolerance must be positive");
     says(quality::type3_study({same, same}, 0.6), "do not vary");
     says(quality::type3_study({two, inf}, 0.6), "(part 2)");
+}
+
+namespace {
+
+// A feature's values over n parts: nominal, a die wearing `drift_per_part` from part `from` on,
+// and the process's N(0, σ); seeded.
+std::vector<double> die_series(std::size_t n, double nominal, double drift_per_part,
+                               std::size_t from, double sigma, std::uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> noise(0.0, sigma);
+    std::vector<double> x(n);
+    for (std::size_t i = 0; i < n; ++i)
+        x[i] = nominal + drift_per_part * static_cast<double>(i > from ? i - from : 0) + noise(rng);
+    return x;
+}
+
+constexpr std::size_t kBaseline = 100;
+
+}  // namespace
+
+// Diameter 3 (69.5 ± 0.3 mm) with the die wearing 5 µm per 100 parts after a 100-part baseline:
+// the warning comes while the process mean is at least 20 % of the tolerance (0.12 mm) short of
+// where it is at the first NOK (issue 19). Capable processes (σ 0.01-0.03 mm, Cp 3.3-10); the
+// margin for σ 0.05 mm is printed, not asserted (docs/quality.md "Drift warning").
+TEST(DriftWarning, FiresOnDieWearWellBeforeTheFirstNok) {
+    const double nominal = 69.5, lower = 69.2, upper = 69.8, drift = 0.005 / 100;
+    for (double sigma : {0.01, 0.02, 0.03, 0.05}) {
+        const auto x = die_series(20000, nominal, drift, kBaseline, sigma, 7);
+        auto m = quality::DriftMonitor::from_baseline(std::span(x).first(kBaseline));
+        ASSERT_TRUE(m.ok()) << m.error().message;
+        std::size_t warned = 0, nok = 0;
+        for (std::size_t i = kBaseline; i < x.size() && !nok; ++i) {
+            if (m->add(x[i]) == quality::Drift::kUp && !warned) warned = i;
+            if (x[i] > upper || x[i] < lower) nok = i;
+        }
+        ASSERT_GT(nok, 0u) << "the series never left the tolerance";
+        const auto shift = [&](std::size_t i) {
+            return drift * static_cast<double>(i - kBaseline);
+        };
+        std::printf(
+            "sigma %.2f mm: warning at part %zu (mean +%.3f mm), first NOK at part %zu "
+            "(mean +%.3f mm): %.0f %% of the tolerance before it\n",
+            sigma, warned, warned ? shift(warned) : 0.0, nok, shift(nok),
+            warned ? 100 * (shift(nok) - shift(warned)) / 0.6 : 0.0);
+        if (sigma > 0.031) continue;
+        ASSERT_GT(warned, 0u) << "no warning before the first NOK, sigma " << sigma;
+        EXPECT_GE(shift(nok) - shift(warned), 0.2 * 0.6) << "sigma " << sigma;
+    }
+}
+
+// Without drift: not one warning in 1 000 parts after the baseline; over 200 such series the
+// share with any warning is printed (the chart's false-alarm rate with a 100-part baseline).
+TEST(DriftWarning, SilentOnAThousandPartsWithoutDrift) {
+    int series_with_alarm = 0;
+    for (std::uint64_t seed = 1; seed <= 200; ++seed) {
+        const auto x = die_series(kBaseline + 1000, 69.5, 0.0, 0, 0.03, seed);
+        auto m = quality::DriftMonitor::from_baseline(std::span(x).first(kBaseline));
+        ASSERT_TRUE(m.ok());
+        int alarms = 0;
+        for (std::size_t i = kBaseline; i < x.size(); ++i)
+            alarms += m->add(x[i]) != quality::Drift::kNone;
+        if (seed == 1) {
+            EXPECT_EQ(alarms, 0) << "a warning without drift";
+        }
+        series_with_alarm += alarms > 0;
+    }
+    std::printf("series of 1000 parts without drift with a warning: %d of 200\n",
+                series_with_alarm);
+    EXPECT_LT(series_with_alarm, 20);  // 10 %: the baseline's σ is an estimate
+}
+
+TEST(DriftWarning, RefusesABaselineItCannotUse) {
+    const std::vector<double> short_one(10, 1.0), flat(50, 1.0);
+    EXPECT_FALSE(quality::DriftMonitor::from_baseline(short_one).ok());
+    EXPECT_FALSE(quality::DriftMonitor::from_baseline(flat).ok());
+    auto m = quality::DriftMonitor::from_baseline(die_series(50, 1.0, 0, 0, 0.01, 3));
+    ASSERT_TRUE(m.ok());
+    EXPECT_EQ(m->add(std::nan("")), quality::Drift::kNone);  // not measured: skipped
+    EXPECT_EQ(m->count(), 0u);
+    quality::DriftConfig bad;
+    bad.lambda = 0;
+    EXPECT_FALSE(
+        quality::DriftMonitor::from_baseline(die_series(50, 1.0, 0, 0, 0.01, 3), bad).ok());
 }
