@@ -9,7 +9,7 @@
 namespace hotgauge::quality {
 
 struct DriftConfig {
-    double lambda = 0.05;       // weight of the newest value
+    double lambda = 0.05;  // weight of the newest value
     // L: the limits are ±L·σ_EWMA around the baseline's mean. 5, not the textbook 3: the
     // baseline's σ is an estimate (MR̄/d2 of 100 values is ±8 %), and with L 4 one series of 1 000
     // drift-free parts in five warned (docs/quality.md "Drift warning").
