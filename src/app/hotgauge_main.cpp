@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
     add(hotgauge::app::add_plc);
     add(hotgauge::app::add_calibrate);
     add(hotgauge::app::add_verify);
+    add(hotgauge::app::add_study);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
