@@ -80,7 +80,7 @@ Bounds part_bounds(const detail::Context& ctx) {
 
 // Cold equivalent, deviation and verdict of a measured feature; tolerances are on cold values.
 void judge(const core::Recording& rec, const core::ThermalModel& material,
-           const std::optional<double>& growth, const MeasureConfig& c, FeatureResult& r) {
+           const std::optional<double>& growth, double temperature_u_c, FeatureResult& r) {
     if (!r.hot_mm) {
         r.verdict = Verdict::kNotMeasured;
         return;
@@ -98,17 +98,14 @@ void judge(const core::Recording& rec, const core::ThermalModel& material,
     // g(T) = 1 + α0·(T − 20) + α1·(T − 20)², so dg/dT = α0 + 2·α1·(T − 20).
     const double dg_dt =
         material.alpha0_per_k + 2.0 * material.alpha1_per_k2 * (*rec.temperature_c - 20.0);
-    r.u_cold_mm = std::hypot(r.u_mm / *growth, *r.cold_mm * dg_dt * c.temperature_u_c / *growth);
+    r.u_cold_mm = std::hypot(r.u_mm / *growth, *r.cold_mm * dg_dt * temperature_u_c / *growth);
     r.deviation_mm = *r.cold_mm - r.nominal_mm;
     const bool ok = *r.deviation_mm >= r.tol_lower_mm && *r.deviation_mm <= r.tol_upper_mm;
     if (r.degraded) {  // whatever the deviation: a value the data cannot vouch for sorts nothing
         r.verdict = Verdict::kDegraded;
-        if (r.degraded_because.empty()) {
-            r.reason = "degraded: measured with untrusted profiles";
-            for (const auto& run : r.left_out) r.reason += "; " + run;
-        } else {
-            r.reason = "degraded: " + r.degraded_because;
-        }
+        r.reason = "degraded: " + (r.degraded_because.empty() ? "measured with untrusted profiles"
+                                                              : r.degraded_because);
+        for (const auto& run : r.left_out) r.reason += "; " + run;
         if (!ok) r.reason += " (deviation outside tolerance)";
         return;
     }
@@ -245,11 +242,11 @@ FeatureResult PartMeasurer::Impl::measure_feature(const FeatureSpec& f) const {
     if (r.hot_mm && again.hot_mm && r.ends.size() == again.ends.size())
         for (std::size_t j = 0; j < r.ends.size(); ++j)
             thin = thin || few(r.ends[j].n_points, again.ends[j].n_points);
-    if (r.hot_mm && !thin && !silhouette(r)) return r;  // measured around them
-    if (r.hot_mm && !thin) {
-        r.degraded = true;
-        r.degraded_because = kSilhouetteBesideHoles;
-        for (const auto& run : r.left_out) r.degraded_because += "; " + run;
+    if (r.hot_mm && !thin) {  // measured around them
+        if (silhouette(r)) {
+            r.degraded = true;
+            r.degraded_because = kSilhouetteBesideHoles;
+        }
         return r;
     }
     again.left_out = std::move(r.left_out);
@@ -305,7 +302,7 @@ PartMeasurement PartMeasurer::finish() {
         const FeatureSpec& f = m.ctx.recipe.features[i];
         FeatureResult r = m.measured[i] ? std::move(*m.measured[i]) : skeleton(f);
         if (!m.measured[i]) measure_one(m.ctx, m.refs(f, false), f, r);  // names the missing face
-        judge(m.rec, m.ctx.recipe.material, out.growth, m.ctx.c, r);
+        judge(m.rec, m.ctx.recipe.material, out.growth, m.ctx.c.temperature_u_c, r);
         out.features.push_back(std::move(r));
     }
     out.verdict = overall(out.features);

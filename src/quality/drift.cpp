@@ -29,10 +29,9 @@ core::Result<DriftMonitor> DriftMonitor::from_baseline(std::span<const double> b
         return core::make_error("drift: lambda must be in (0, 1] and the limit positive");
     const auto chart = individuals_chart(baseline);
     if (!chart) return core::make_error("drift baseline: " + chart.error().message);
-    const double sigma = (chart->ucl - chart->centre) / 3.0;  // MR̄ / d2
-    if (!(sigma > 0))
+    if (!(chart->sigma > 0))
         return core::make_error("drift baseline: the values do not change from one to the next");
-    return DriftMonitor(chart->centre, sigma, config);
+    return DriftMonitor(chart->centre, chart->sigma, config);
 }
 
 DriftMonitor::DriftMonitor(double mean, double sigma, const DriftConfig& config)
@@ -48,8 +47,8 @@ Drift DriftMonitor::add(double value) {
     if (!std::isfinite(value)) return state_;
     ++n_;
     z_ = config_.lambda * value + (1.0 - config_.lambda) * z_;
-    const double off = z_ - mean_;
-    state_ = off > limit() ? Drift::kUp : off < -limit() ? Drift::kDown : Drift::kNone;
+    const double off = z_ - mean_, lim = limit();
+    state_ = off > lim ? Drift::kUp : off < -lim ? Drift::kDown : Drift::kNone;
     return state_;
 }
 

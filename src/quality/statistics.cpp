@@ -41,6 +41,9 @@ double mean_moving_range(std::span<const double> x) {
     return sum / static_cast<double>(x.size() - 1);
 }
 
+// The within σ of individual values: MR̄ / d2.
+double within_sigma(double mr_bar) { return mr_bar / kD2; }
+
 }  // namespace
 
 core::Result<Capability> capability(std::span<const double> x, double lsl, double usl) {
@@ -52,7 +55,7 @@ core::Result<Capability> capability(std::span<const double> x, double lsl, doubl
     c.n = x.size();
     c.mean = mean_of(x);
     c.s_overall = sample_std(x, c.mean);
-    c.s_within = mean_moving_range(x) / kD2;
+    c.s_within = within_sigma(mean_moving_range(x));
     if (!(c.s_overall > 0) || !(c.s_within > 0))
         return core::make_error("capability: the values do not vary (" + count(x.size()) +
                                 " equal values, or no change from one to the next)");
@@ -69,8 +72,9 @@ core::Result<IndividualsChart> individuals_chart(std::span<const double> baselin
     IndividualsChart c;
     c.centre = mean_of(baseline);
     c.mr_bar = mean_moving_range(baseline);
-    c.lcl = c.centre - 3.0 * c.mr_bar / kD2;
-    c.ucl = c.centre + 3.0 * c.mr_bar / kD2;
+    c.sigma = within_sigma(c.mr_bar);
+    c.lcl = c.centre - 3.0 * c.sigma;
+    c.ucl = c.centre + 3.0 * c.sigma;
     c.mr_ucl = kD4 * c.mr_bar;
     return c;
 }

@@ -76,9 +76,11 @@ struct FeatureResult {
     // when it could not be measured without them, used and the feature degraded.
     std::vector<std::string> left_out;
     bool degraded = false;
-    std::string degraded_because;   // why a degraded value is not vouched for; empty: see left_out
-    std::optional<double> hot_mm;   // as measured at the part temperature
-    std::optional<double> cold_mm;  // hot / (1 + α(T)·(T − 20)); needs the temperature
+    // Why a degraded value is not vouched for, before its left_out runs in the reason; empty:
+    // "measured with untrusted profiles".
+    std::string degraded_because;
+    std::optional<double> hot_mm;     // as measured at the part temperature
+    std::optional<double> cold_mm;    // hot / (1 + α(T)·(T − 20)); needs the temperature
     std::optional<double> u_cold_mm;  // cold_mm's standard uncertainty: u_mm and the pyrometer's
     double nominal_mm = 0, tol_lower_mm = 0, tol_upper_mm = 0;
     std::optional<double> deviation_mm;  // cold − nominal

@@ -20,10 +20,11 @@ struct Capability {
 };
 core::Result<Capability> capability(std::span<const double> x, double lsl, double usl);
 
-// Individuals and moving-range chart limits from a baseline: centre x̄, x̄ ± 3·MR̄/d2, and the
+// Individuals and moving-range chart limits from a baseline: centre x̄, x̄ ± 3·σ (σ = MR̄/d2), the
 // moving range's upper limit D4·MR̄ (D4 = 3.267; its lower limit is 0).
 struct IndividualsChart {
     double centre = 0, lcl = 0, ucl = 0;
+    double sigma = 0;  // the within σ the limits come from: MR̄/d2
     double mr_bar = 0, mr_ucl = 0;
 };
 core::Result<IndividualsChart> individuals_chart(std::span<const double> baseline);
