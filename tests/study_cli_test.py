@@ -21,7 +21,8 @@ def line(seq, part_id, features):
                        "sequence": seq, "software_version": "test", "config_hash": "x",
                        "archived_as": None,
                        "part": {"part_id": part_id, "recipe": "hub-a", "verdict": "OK",
-                                "features": [{"name": n, "cold_mm": v,
+                                "features": [{"name": n, "cold_mm": v, "nominal_mm": 48.3,
+                                              "tolerance_mm": [-0.3, 0.3],
                                               "verdict": "OK" if v is not None else "NOT_MEASURED"}
                                              for n, v in features.items()]}})
 

@@ -200,3 +200,28 @@ TEST(DriftWarning, RefusesABaselineItCannotUse) {
     EXPECT_FALSE(
         quality::DriftMonitor::from_baseline(die_series(50, 1.0, 0, 0, 0.01, 3), bad).ok());
 }
+
+// Western Electric rules on series written in σ from the centre (centre 2, σ 0.5: the rules
+// must read the zones in σ, not in mm), each built to complete one rule at a known point.
+TEST(WesternElectric, MarksThePointThatCompletesEachRule) {
+    auto marks = [](std::vector<double> z) {
+        for (double& v : z) v = 2.0 + 0.5 * v;
+        std::vector<std::pair<std::size_t, int>> out;
+        for (const auto& v : quality::western_electric(z, 2.0, 0.5))
+            out.emplace_back(v.index, v.rule);
+        return out;
+    };
+    using Marks = std::vector<std::pair<std::size_t, int>>;
+    EXPECT_EQ(marks({0, 0.5, -3.2, 0}), (Marks{{2, 1}}));
+    EXPECT_EQ(marks({0, 2.5, 0, 2.4}), (Marks{{3, 2}}));
+    EXPECT_EQ(marks({0, -2.5, -2.1, 0}), (Marks{{2, 2}}));
+    EXPECT_EQ(marks({0, 2.5, -2.5, 0}), Marks{});    // opposite sides
+    EXPECT_EQ(marks({0, 2.5, 0, 0, 2.5}), Marks{});  // 2 of 4, not of 3
+    EXPECT_EQ(marks({1.5, 1.2, 0, 1.9, 1.1, 0}), (Marks{{4, 3}}));
+    EXPECT_EQ(marks({1.5, -1.2, 0, 1.9, 1.1}), Marks{});   // 3 of 5 on the side
+    EXPECT_EQ(marks({1.5, 1.5, 1.5, 1.5, 0.2}), Marks{});  // completing point not beyond 1σ
+    EXPECT_EQ(marks({0.1, 0.3, 0.2, 0.9, 0.4, 0.1, 0.5, 0.2, 0.3}), (Marks{{7, 4}, {8, 4}}));
+    EXPECT_EQ(marks({-0.1, -0.3, -0.2, -0.9, -0.4, -0.1, -0.5, 0.2}), Marks{});  // 7 below
+    // 3.5σ in the middle of a run above: rule 1, and rule 4 at its 8th point.
+    EXPECT_EQ(marks({0.2, 0.2, 0.2, 3.5, 0.2, 0.2, 0.2, 0.2}), (Marks{{3, 1}, {7, 4}}));
+}

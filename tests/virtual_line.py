@@ -653,6 +653,8 @@ def main():
     ap.add_argument("--master-at", type=int, metavar="K",
                     help="after part K, the cold master twice: master slots 9 (passes) and 10 "
                          "(a certificate with Diameter 3 off: fails)")
+    ap.add_argument("--check-reports", action="store_true",
+                    help="check the AQDEF export and the reports in Chromium (report_check.py)")
     ap.add_argument("--check-nominal-mm", type=float,
                     help="with --commission: fail unless, with the nominal geometry, a part is not "
                          "found, a feature not measured, or one off by at least this much")
@@ -709,6 +711,10 @@ def main():
         print(f"results: {', '.join(os.path.join(line.results_dir, f) for f in csvs + jsonls)} "
               f"(sequence {seqs[0]}..{seqs[-1]})")
         assert rcs.get("hotgauged") == 0, f"hotgauged exited with {rcs.get('hotgauged')}"
+        if a.check_reports:
+            import report_check
+            report_check.check_aqdef(a.bin_dir, line.results_dir, workdir)
+            report_check.check_lot_report(a.bin_dir, line.results_dir, workdir)
         check_notifications(line.notify)
         assert all(p["state"] == DONE for p in parts), "a part was not measured"
         if a.check_mm is not None:

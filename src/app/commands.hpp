@@ -23,6 +23,8 @@ Command add_plc(CLI::App& app);
 Command add_calibrate(CLI::App& app);
 Command add_verify(CLI::App& app);
 Command add_study(CLI::App& app);
+Command add_report(CLI::App& app);
+Command add_export(CLI::App& app);
 
 // The measure job, shared by `measure` and `verify`: read the recording, take the calibration's
 // geometry, read the recipe, the pose or model, run the pipeline.

@@ -27,6 +27,8 @@ int main(int argc, char** argv) {
     add(hotgauge::app::add_calibrate);
     add(hotgauge::app::add_verify);
     add(hotgauge::app::add_study);
+    add(hotgauge::app::add_report);
+    add(hotgauge::app::add_export);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

@@ -79,6 +79,36 @@ core::Result<IndividualsChart> individuals_chart(std::span<const double> baselin
     return c;
 }
 
+namespace {
+
+// Whether at least `need` of the `window` points ending at i lie beyond `zones` σ on the side
+// `side` (+1 above the centre, −1 below), point i among them.
+bool zone_rule(std::span<const double> z, std::size_t i, std::size_t window, std::size_t need,
+               double zones, int side) {
+    if (i + 1 < window || side * z[i] <= zones) return false;
+    std::size_t beyond = 0;
+    for (std::size_t k = i + 1 - window; k <= i; ++k) beyond += side * z[k] > zones ? 1 : 0;
+    return beyond >= need;
+}
+
+}  // namespace
+
+std::vector<RuleViolation> western_electric(std::span<const double> x, double centre,
+                                            double sigma) {
+    std::vector<double> z(x.size());  // in σ from the centre
+    for (std::size_t i = 0; i < x.size(); ++i) z[i] = (x[i] - centre) / sigma;
+    std::vector<RuleViolation> out;
+    for (std::size_t i = 0; i < z.size(); ++i) {
+        if (std::abs(z[i]) > 3.0) out.push_back({i, 1});
+        for (int side : {1, -1}) {
+            if (zone_rule(z, i, 3, 2, 2.0, side)) out.push_back({i, 2});
+            if (zone_rule(z, i, 5, 4, 1.0, side)) out.push_back({i, 3});
+            if (zone_rule(z, i, 8, 8, 0.0, side)) out.push_back({i, 4});
+        }
+    }
+    return out;
+}
+
 core::Result<Type1Study> type1_study(std::span<const double> x, double reference, double tolerance,
                                      double resolution) {
     if (auto ok = check_values(x, 2, "type-1 study"); !ok) return ok.error();

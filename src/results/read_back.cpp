@@ -1,9 +1,11 @@
 #include "hotgauge/results/read_back.hpp"
 
 #include <algorithm>
+#include <array>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <string_view>
 
 namespace hotgauge::results {
 namespace {
@@ -25,57 +27,122 @@ core::Result<std::vector<std::filesystem::path>> day_files(const std::filesystem
     return files;
 }
 
-// The feature's value in one result line; nullopt when the part has no such feature.
-std::optional<FeatureValue> value_of(const json& line, const std::string& feature) {
-    const json& part = line.at("part");
-    for (const json& f : part.at("features")) {
-        if (f.at("name").get<std::string>() != feature) continue;
-        FeatureValue v;
-        v.sequence = line.at("sequence").get<std::uint64_t>();
-        v.time = line.value("time", "");
-        v.part_id = part.value("part_id", "");
-        if (f.contains("cold_mm") && f["cold_mm"].is_number())
-            v.cold_mm = f["cold_mm"].get<double>();
-        v.verdict = f.value("verdict", "");
-        return v;
-    }
+// The parts of a line a reader of values needs; the rest (per-face, compensation, matching,
+// uncertainty budgets: most of a line's bytes) is skipped while parsing.
+bool keep(int /*depth*/, json::parse_event_t event, json& parsed) {
+    static constexpr std::array<std::string_view, 9> kSkipped = {
+        "compensation", "faces", "match",    "stage_ms", "u_budget_mm",
+        "edge",         "ends",  "left_out", "warnings"};
+    if (event != json::parse_event_t::key) return true;
+    const auto& key = parsed.get_ref<const std::string&>();
+    return std::find(kSkipped.begin(), kSkipped.end(), key) == kSkipped.end();
+}
+
+std::optional<double> number_or_null(const json& j, const char* key) {
+    if (auto it = j.find(key); it != j.end() && it->is_number()) return it->get<double>();
     return std::nullopt;
+}
+
+FeatureRecord feature_of(const json& f) {
+    FeatureRecord r;
+    r.name = f.at("name").get<std::string>();
+    r.slot = f.value("slot", 0);
+    r.nominal_mm = f.at("nominal_mm").get<double>();
+    const json& tol = f.at("tolerance_mm");
+    r.lower_mm = tol.at(0).get<double>();
+    r.upper_mm = tol.at(1).get<double>();
+    r.cold_mm = number_or_null(f, "cold_mm");
+    r.u_cold_mm = number_or_null(f, "u_cold_mm");
+    r.verdict = f.value("verdict", "");
+    if (auto it = f.find("reason"); it != f.end() && it->is_string()) r.reason = *it;
+    return r;
+}
+
+PartRecord part_of(const json& line) {
+    PartRecord p;
+    p.sequence = line.at("sequence").get<std::uint64_t>();
+    p.time_ns = line.value("time_ns", std::int64_t{0});
+    p.time = line.value("time", "");
+    p.master_check = line.contains("verification");
+    const json& part = line.at("part");
+    p.part_id = part.value("part_id", "");
+    p.recipe = part.value("recipe", "");
+    p.verdict = part.value("verdict", "");
+    p.temperature_c = number_or_null(part, "temperature_c");
+    for (const json& f : part.at("features")) p.features.push_back(feature_of(f));
+    return p;
+}
+
+// "2026-12-04.jsonl" can hold parts in the range only if its day can.
+bool day_may_hold(const std::filesystem::path& file, const TimeRange& range) {
+    const std::string day = file.stem().string();
+    if (!range.from.empty() && day < range.from.substr(0, day.size())) return false;
+    if (!range.to.empty() && day > range.to.substr(0, day.size())) return false;
+    return true;
+}
+
+core::Result<void> read_file(const std::filesystem::path& path, const TimeRange& range,
+                             PartsRead& out, std::map<std::uint64_t, std::size_t>& at) {
+    std::ifstream in(path);
+    if (!in) return core::make_error(path.string() + ": cannot open");
+    ++out.files;
+    std::string text;
+    for (std::size_t n = 1; std::getline(in, text); ++n) {
+        if (text.empty()) continue;
+        ++out.lines;
+        PartRecord p;
+        try {
+            p = part_of(json::parse(text, keep));
+        } catch (const json::exception& e) {
+            return core::make_error(path.string() + ":" + std::to_string(n) +
+                                    ": not a result line: " + e.what());
+        }
+        if (!range.contains(p.time)) continue;
+        if (auto seen = at.find(p.sequence); seen != at.end()) {
+            out.parts[seen->second] = std::move(p);
+            continue;
+        }
+        at[p.sequence] = out.parts.size();
+        out.parts.push_back(std::move(p));
+    }
+    return {};
 }
 
 }  // namespace
 
-core::Result<FeatureSeries> read_feature_values(const std::filesystem::path& dir,
-                                                const std::string& feature) {
+bool TimeRange::contains(const std::string& time) const {
+    if (!from.empty() && time.compare(0, from.size(), from) < 0) return false;
+    if (!to.empty() && time.compare(0, to.size(), to) > 0) return false;
+    return true;
+}
+
+core::Result<PartsRead> read_parts(const std::filesystem::path& dir, const TimeRange& range) {
     const auto files = day_files(dir);
     if (!files) return files.error();
-    FeatureSeries out;
-    std::map<std::uint64_t, std::size_t> at;  // sequence → index in out.values
+    PartsRead out;
+    std::map<std::uint64_t, std::size_t> at;  // sequence → index in out.parts
     for (const auto& path : *files) {
-        std::ifstream in(path);
-        if (!in) return core::make_error(path.string() + ": cannot open");
-        ++out.files;
-        std::string text;
-        for (std::size_t n = 1; std::getline(in, text); ++n) {
-            if (text.empty()) continue;
-            ++out.lines;
-            std::optional<FeatureValue> v;
-            try {
-                v = value_of(json::parse(text), feature);
-            } catch (const json::exception& e) {
-                return core::make_error(path.string() + ":" + std::to_string(n) +
-                                        ": not a result line: " + e.what());
-            }
-            if (!v) {
-                ++out.without_feature;
-                continue;
-            }
-            if (auto seen = at.find(v->sequence); seen != at.end()) {
-                out.values[seen->second] = std::move(*v);
-                continue;
-            }
-            at[v->sequence] = out.values.size();
-            out.values.push_back(std::move(*v));
+        if (!day_may_hold(path, range)) continue;
+        if (auto ok = read_file(path, range, out, at); !ok) return ok.error();
+    }
+    return out;
+}
+
+core::Result<FeatureSeries> read_feature_values(const std::filesystem::path& dir,
+                                                const std::string& feature) {
+    const auto read = read_parts(dir);
+    if (!read) return read.error();
+    FeatureSeries out;
+    out.files = read->files;
+    out.lines = read->lines;
+    for (const PartRecord& p : read->parts) {
+        const auto f = std::find_if(p.features.begin(), p.features.end(),
+                                    [&](const FeatureRecord& r) { return r.name == feature; });
+        if (f == p.features.end()) {
+            ++out.without_feature;
+            continue;
         }
+        out.values.push_back({p.sequence, p.time, p.part_id, f->cold_mm, f->verdict});
     }
     if (out.values.empty())
         return core::make_error(dir.string() + ": no part has a feature '" + feature + "' (" +

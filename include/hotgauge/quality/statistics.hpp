@@ -33,6 +33,20 @@ core::Result<IndividualsChart> individuals_chart(std::span<const double> baselin
 // Cg = 0.2·T / (6·s), Cgk = (0.1·T − |x̄ − reference|) / (3·s); the bias's significance by
 // Student's t (two-sided, n − 1 degrees of freedom); the resolution as a share of T (at most
 // 5 % to pass).
+// Western Electric rules on an individuals chart (AT&T Statistical Quality Control Handbook,
+// 1956; Nelson rules 1, 5, 6 and 2 with 8 points), zones of the chart's within σ about its
+// centre. A violation is marked on the point that completes it, and only when that point is
+// itself in the zone the rule names (beyond 2σ for rule 2 …, on the side for rule 4).
+//   1: one point beyond 3σ;
+//   2: 2 of 3 consecutive points beyond 2σ on the same side;
+//   3: 4 of 5 consecutive points beyond 1σ on the same side;
+//   4: 8 consecutive points on the same side of the centre.
+struct RuleViolation {
+    std::size_t index = 0;  // in x
+    int rule = 0;           // 1 … 4
+};
+std::vector<RuleViolation> western_electric(std::span<const double> x, double centre, double sigma);
+
 struct Type1Study {
     std::size_t n = 0;
     double mean = 0, s = 0, bias = 0;

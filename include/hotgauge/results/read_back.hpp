@@ -1,6 +1,7 @@
 #pragma once
-// Reading the results files back (docs/results.md): one feature's values over the day files of a
-// results folder, for the gauge studies and reports (docs/quality.md).
+// Reading the results files back (docs/results.md): the parts of a results folder's day files,
+// or one feature's values over them, for the gauge studies, the lot report and the AQDEF export
+// (docs/quality.md).
 #include <cstdint>
 #include <filesystem>
 #include <optional>
@@ -10,6 +11,48 @@
 #include "hotgauge/core/result.hpp"
 
 namespace hotgauge::results {
+
+// One feature of one part, as the JSON line has it (docs/measure-output.md).
+struct FeatureRecord {
+    std::string name;
+    int slot = 0;
+    double nominal_mm = 0;
+    double lower_mm = 0, upper_mm = 0;  // allowed deviations from nominal (tolerance_mm)
+    std::optional<double> cold_mm;      // empty: not measured
+    std::optional<double> u_cold_mm;
+    std::string verdict;  // OK, NOK, NOT_MEASURED, DEGRADED
+    std::string reason;   // why not measured / NOK / degraded; "" when none
+};
+
+// One result line: a part, or a master check (`verification` in the line).
+struct PartRecord {
+    std::uint64_t sequence = 0;
+    std::int64_t time_ns = 0;
+    std::string time;  // as written: local time with its UTC offset
+    std::string part_id, recipe, verdict;
+    std::optional<double> temperature_c;
+    bool master_check = false;
+    std::vector<FeatureRecord> features;  // in recipe order
+};
+
+// Which parts to read: by the local time as written, compared on the bound's length, both ends
+// included: from "2026-12-04" to "2026-12-04" is that day, from "2026-12-04T06" to
+// "2026-12-04T13" a shift. Empty: no bound.
+struct TimeRange {
+    std::string from, to;
+    bool contains(const std::string& time) const;
+};
+
+struct PartsRead {
+    std::vector<PartRecord> parts;  // in file order (days by name), one per sequence number
+    std::size_t files = 0, lines = 0;
+};
+
+// Every `*.jsonl` file of `dir`, in name order (YYYY-MM-DD sorts by day; a day file outside the
+// range is not opened). A line repeated with the same sequence (an append retried after a full
+// disk) counts once, the last. Errors name the folder, or the file and line that is not a result
+// line.
+core::Result<PartsRead> read_parts(const std::filesystem::path& dir, const TimeRange& range = {});
 
 struct FeatureValue {
     std::uint64_t sequence = 0;
@@ -25,9 +68,8 @@ struct FeatureSeries {
     std::size_t without_feature = 0;  // parts whose recipe has no such feature
 };
 
-// Every `*.jsonl` file of `dir`, in name order (YYYY-MM-DD sorts by day). A line repeated with the
-// same sequence (an append retried after a full disk) counts once, the last. Errors name the
-// folder, or the file and line that is not a result line; a feature that no part has is an error.
+// One feature's values over read_parts(dir) (master checks included: a type-1 study takes the
+// master's); a feature that no part has is an error.
 core::Result<FeatureSeries> read_feature_values(const std::filesystem::path& dir,
                                                 const std::string& feature);
 

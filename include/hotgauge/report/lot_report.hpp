@@ -1,0 +1,62 @@
+#pragma once
+// The lot report (issue 19, docs/results.md "Lot report"): one self-contained HTML page over the
+// parts of a results folder in a time range: per feature an individuals / moving-range chart
+// with control limits from a baseline, Western Electric rule violations and the drift warning
+// marked, a histogram against the tolerance, Cp/Cpk and Pp/Ppk, and the counts of each verdict
+// with their reasons. Inline SVG, no script, nothing fetched: it opens from a USB stick.
+#include <cstddef>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "hotgauge/quality/drift.hpp"
+#include "hotgauge/quality/statistics.hpp"
+#include "hotgauge/results/read_back.hpp"
+
+namespace hotgauge::report {
+
+struct LotOptions {
+    // Control limits and the drift warning's baseline: the first values of each feature. With
+    // fewer than kMinBaseline measured values there are no limits, and the page says so.
+    std::size_t baseline = 25;
+    std::string title = "Lot report";
+};
+inline constexpr std::size_t kMinBaseline = 20;  // DriftMonitor's minimum, and the charts'
+
+// One feature over the lot. Statistics use the values with verdict OK or NOK; degraded values
+// (measured with untrusted data) are counted and listed, not used.
+struct FeatureLot {
+    std::string name;
+    double nominal_mm = 0, lower_mm = 0, upper_mm = 0;  // limits as deviations from nominal
+    std::vector<double> values;                         // cold, in part order
+    std::vector<std::uint64_t> sequences;               // the part of each value
+    std::map<std::string, std::size_t> verdicts;        // OK, NOK, NOT_MEASURED, DEGRADED
+    std::map<std::string, std::size_t> reasons;         // grouped (reason_group)
+    std::size_t baseline = 0;                           // values the limits come from
+    std::optional<quality::IndividualsChart> chart;
+    std::optional<quality::Capability> capability;
+    std::vector<quality::RuleViolation> violations;
+    std::optional<std::size_t> drift_at;  // index in values of the first drift warning
+    quality::Drift drift = quality::Drift::kNone;
+    std::string no_statistics;  // why there are no limits or indices, when there are none
+};
+
+struct Lot {
+    std::size_t parts = 0, master_checks = 0;
+    std::map<std::string, std::size_t> verdicts;  // of the parts
+    std::string first_time, last_time;
+    std::uint64_t first_sequence = 0, last_sequence = 0;
+    std::vector<FeatureLot> features;  // in recipe order of the first part, then new ones
+};
+
+// The statistics of every feature of the production parts (master checks left out).
+Lot summarize_lot(const std::vector<results::PartRecord>& parts, const LotOptions& options);
+
+// A reason without its numbers: the text before the first ';' and the distinct causes after
+// each "): " ("degraded: measured with untrusted profiles (accelerometer gap)").
+std::string reason_group(const std::string& reason);
+
+std::string lot_report_html(const Lot& lot, const LotOptions& options);
+
+}  // namespace hotgauge::report

@@ -1,0 +1,62 @@
+// hotgauge report lot RESULTS: the lot report of docs/results.md over a results folder.
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <string>
+
+#include "commands.hpp"
+#include "hotgauge/report/lot_report.hpp"
+
+namespace hotgauge::app {
+namespace {
+
+struct LotArgs {
+    std::string results, out;
+    results::TimeRange range;
+    report::LotOptions options;
+};
+
+int fail(const std::string& why) {
+    std::fprintf(stderr, "hotgauge report: %s\n", why.c_str());
+    return 1;
+}
+
+int run_lot(const LotArgs& a) {
+    const auto read = results::read_parts(a.results, a.range);
+    if (!read) return fail(read.error().message);
+    report::LotOptions options = a.options;
+    options.title = "Lot report: " + a.results +
+                    (a.range.from.empty() ? "" : ", from " + a.range.from) +
+                    (a.range.to.empty() ? "" : " to " + a.range.to);
+    const report::Lot lot = report::summarize_lot(read->parts, options);
+    if (lot.parts == 0)
+        return fail(a.results + ": no production part in the range (" +
+                    std::to_string(read->lines) + " results read)");
+    std::ofstream out(a.out, std::ios::binary);
+    out << report::lot_report_html(lot, options);
+    out.close();
+    if (!out) return fail(a.out + ": cannot write");
+    std::fprintf(stderr, "%s: %zu parts, %zu features, %zu master checks left out\n", a.out.c_str(),
+                 lot.parts, lot.features.size(), lot.master_checks);
+    return 0;
+}
+
+}  // namespace
+
+Command add_report(CLI::App& app) {
+    auto a = std::make_shared<LotArgs>();
+    auto* r = app.add_subcommand("report", "reports for quality engineers (docs/results.md)");
+    r->require_subcommand(1);
+    auto* lot = r->add_subcommand("lot", "lot report: SPC charts, capability, verdict counts");
+    lot->add_option("results", a->results, "results folder (YYYY-MM-DD.jsonl files)")->required();
+    lot->add_option("--out", a->out, "the HTML file to write")->required();
+    lot->add_option("--from", a->range.from, "first local time, as a prefix: 2026-12-04[T06[:30]]");
+    lot->add_option("--to", a->range.to, "last local time, as a prefix (included)");
+    lot->add_option("--baseline", a->options.baseline,
+                    "values per feature the control limits come from (at least 20)")
+        ->capture_default_str()
+        ->check(CLI::Range(std::size_t{report::kMinBaseline}, std::size_t{1000000}));
+    return [a, lot] { return lot->parsed() ? run_lot(*a) : 2; };
+}
+
+}  // namespace hotgauge::app

@@ -1,0 +1,90 @@
+#include "hotgauge/report/lot_report.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include "svg.hpp"
+
+namespace hotgauge::report {
+namespace {
+
+FeatureLot& feature_lot(Lot& lot, const results::FeatureRecord& f) {
+    for (FeatureLot& fl : lot.features)
+        if (fl.name == f.name) return fl;
+    FeatureLot fl;
+    fl.name = f.name;
+    fl.nominal_mm = f.nominal_mm;
+    fl.lower_mm = f.lower_mm;
+    fl.upper_mm = f.upper_mm;
+    lot.features.push_back(std::move(fl));
+    return lot.features.back();
+}
+
+// Limits, rules, capability and drift of one feature's values.
+void add_statistics(FeatureLot& f, const LotOptions& options) {
+    if (f.values.size() < kMinBaseline) {
+        f.no_statistics = std::to_string(f.values.size()) + " values measured OK or NOK, " +
+                          std::to_string(kMinBaseline) + " needed for limits and indices";
+        return;
+    }
+    f.baseline = std::clamp(options.baseline, kMinBaseline, f.values.size());
+    const std::span<const double> all(f.values), base = all.first(f.baseline);
+    const auto chart = quality::individuals_chart(base);
+    const auto cap = quality::capability(all, f.nominal_mm + f.lower_mm, f.nominal_mm + f.upper_mm);
+    if (!chart || !cap) {  // values that do not vary, limits in the wrong order
+        f.no_statistics = (!chart ? chart.error() : cap.error()).message;
+        return;
+    }
+    f.chart = *chart;
+    f.capability = *cap;
+    f.violations = quality::western_electric(all, chart->centre, chart->sigma);
+    quality::DriftMonitor drift(chart->centre, chart->sigma, {});
+    for (std::size_t i = f.baseline; i < f.values.size(); ++i)
+        if (drift.add(f.values[i]) != quality::Drift::kNone && !f.drift_at) f.drift_at = i;
+    f.drift = drift.state();
+}
+
+}  // namespace
+
+std::string reason_group(const std::string& reason) {
+    std::string out = reason.substr(0, reason.find(';'));
+    std::set<std::string> causes;
+    for (auto at = reason.find("): "); at != std::string::npos; at = reason.find("): ", at + 3)) {
+        const auto from = at + 3;
+        causes.insert(reason.substr(from, reason.find(';', from) - from));
+    }
+    std::string joined;
+    for (const auto& c : causes) joined += (joined.empty() ? "" : ", ") + c;
+    return joined.empty() ? out : out + " (" + joined + ")";
+}
+
+Lot summarize_lot(const std::vector<results::PartRecord>& parts, const LotOptions& options) {
+    Lot lot;
+    for (const results::PartRecord& p : parts) {
+        if (p.master_check) {
+            ++lot.master_checks;
+            continue;
+        }
+        if (lot.parts++ == 0) {
+            lot.first_time = p.time;
+            lot.first_sequence = p.sequence;
+        }
+        lot.last_time = p.time;
+        lot.last_sequence = p.sequence;
+        ++lot.verdicts[p.verdict];
+        for (const results::FeatureRecord& r : p.features) {
+            FeatureLot& f = feature_lot(lot, r);
+            ++f.verdicts[r.verdict];
+            if (!r.reason.empty()) ++f.reasons[reason_group(r.reason)];
+            if (r.cold_mm && (r.verdict == "OK" || r.verdict == "NOK")) {
+                f.values.push_back(*r.cold_mm);
+                f.sequences.push_back(p.sequence);
+            }
+        }
+    }
+    for (FeatureLot& f : lot.features) add_statistics(f, options);
+    return lot;
+}
+
+}  // namespace hotgauge::report

@@ -1,0 +1,188 @@
+// The lot report's statistics and page, the AQDEF export and reading the results back
+// (issue 19; docs/results.md). The statistics themselves are checked against NumPy and
+// statsmodels in test_quality; here: that the report feeds them the right values.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <random>
+#include <regex>
+#include <string>
+#include <vector>
+
+#include "hotgauge/quality/statistics.hpp"
+#include "hotgauge/report/aqdef.hpp"
+#include "hotgauge/report/lot_report.hpp"
+#include "hotgauge/results/read_back.hpp"
+#include "temp_dir.hpp"
+
+using namespace hotgauge;
+
+namespace {
+
+results::FeatureRecord feature(const std::string& name, std::optional<double> v,
+                               const std::string& verdict, const std::string& reason = "") {
+    return {name, 1, 69.5, -0.3, 0.3, v, 0.002, verdict, reason};
+}
+
+// 60 parts: Diameter 3 ~ N(69.5, 0.01) with an outlier at part 40, a degraded value at 45, not
+// measured at 50; a master check after part 30; Height 1 always measured.
+std::vector<results::PartRecord> lot_parts() {
+    std::mt19937 rng(5);
+    std::normal_distribution<double> noise(0.0, 0.01);
+    std::vector<results::PartRecord> parts;
+    for (int i = 1; i <= 60; ++i) {
+        results::PartRecord p;
+        p.sequence = std::uint64_t(i);
+        p.time =
+            "2026-12-04T08:" + std::string(i < 10 ? "0" : "") + std::to_string(i) + ":00.000+01:00";
+        p.part_id = std::to_string(240000 + i);
+        p.recipe = "hub-a";
+        p.verdict = "OK";
+        const double d = 69.5 + noise(rng) + (i == 40 ? 0.08 : 0.0);
+        if (i == 45)
+            p.features.push_back(feature("Diameter 3", d, "DEGRADED",
+                                         "degraded: measured with untrusted profiles; top "
+                                         "profiles 0–1299 (0.000–1.299 s): accelerometer gap"));
+        else if (i == 50)
+            p.features.push_back(feature("Diameter 3", std::nullopt, "NOT_MEASURED",
+                                         "not measured: edge not found"));
+        else
+            p.features.push_back(feature("Diameter 3", d, "OK"));
+        p.features.push_back(feature("Height 1", 39.3 + noise(rng), "OK"));
+        parts.push_back(p);
+        if (i == 30) {
+            p.master_check = true;
+            p.sequence = 1000;
+            p.features[0].cold_mm = 80.0;  // would wreck the statistics if it were used
+            parts.push_back(p);
+        }
+    }
+    return parts;
+}
+
+std::size_t count(const std::string& text, const std::string& what) {
+    std::size_t n = 0;
+    for (auto at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+    return n;
+}
+
+}  // namespace
+
+TEST(LotReport, StatisticsUseTheOkAndNokValuesOfProductionParts) {
+    const auto parts = lot_parts();
+    const report::Lot lot = report::summarize_lot(parts, {});
+    EXPECT_EQ(lot.parts, 60u);
+    EXPECT_EQ(lot.master_checks, 1u);
+    ASSERT_EQ(lot.features.size(), 2u);
+    const report::FeatureLot& d = lot.features[0];
+    ASSERT_EQ(d.values.size(), 58u);  // not the degraded, the not measured, the master's
+    EXPECT_EQ(d.verdicts.at("DEGRADED"), 1u);
+    EXPECT_EQ(d.verdicts.at("NOT_MEASURED"), 1u);
+    std::vector<double> expected;
+    for (const auto& p : parts)
+        if (!p.master_check && p.features[0].verdict == "OK")
+            expected.push_back(*p.features[0].cold_mm);
+    const auto cap = quality::capability(expected, 69.2, 69.8);
+    const auto chart = quality::individuals_chart(std::span(expected).first(25));
+    ASSERT_TRUE(cap && chart && d.capability && d.chart);
+    EXPECT_DOUBLE_EQ(d.capability->cpk, cap->cpk);
+    EXPECT_DOUBLE_EQ(d.capability->ppk, cap->ppk);
+    EXPECT_DOUBLE_EQ(d.chart->ucl, chart->ucl);
+    EXPECT_EQ(d.baseline, 25u);
+    // The outlier (part 40, 8σ) is marked by rule 1, on its own sequence number.
+    bool outlier = false;
+    for (const auto& v : d.violations) outlier |= v.rule == 1 && d.sequences[v.index] == 40;
+    EXPECT_TRUE(outlier);
+    EXPECT_EQ(d.reasons.count("degraded: measured with untrusted profiles (accelerometer gap)"),
+              1u);
+    EXPECT_FALSE(lot.features[1].drift_at);  // no drift in Height 1
+}
+
+TEST(LotReport, PageHasTwoChartsPerFeatureWithValuesAndNoOutsideReference) {
+    auto parts = lot_parts();
+    parts[0].features[1].name = "Height <1>";  // escaped, not markup
+    for (auto& p : parts) p.features[1].name = "Height <1>";
+    const std::string html = report::lot_report_html(report::summarize_lot(parts, {}), {});
+    EXPECT_EQ(count(html, "<svg class='chart'"), 2u);
+    EXPECT_EQ(count(html, "<svg class='histogram'"), 2u);
+    EXPECT_EQ(count(html, "Height &lt;1&gt;"), 2u);  // summary row and section heading
+    EXPECT_EQ(count(html, "<script"), 0u);
+    EXPECT_FALSE(std::regex_search(html, std::regex("(src|href)='(?!#)")));
+    // Too few values: no limits and a reason, still a chart of what there is.
+    parts.resize(10);
+    const std::string few = report::lot_report_html(report::summarize_lot(parts, {}), {});
+    EXPECT_EQ(count(few, "<svg class='chart'"), 2u);
+    EXPECT_NE(few.find("10 values measured OK or NOK, 20 needed"), std::string::npos);
+    EXPECT_EQ(count(few, "UCL"), 0u);
+}
+
+TEST(LotReport, DriftIsMarkedWhereTheEwmaLeavesItsLimits) {
+    auto parts = lot_parts();
+    for (std::size_t i = 0; i < parts.size(); ++i)  // 1.5 µm a part from part 30 on
+        if (!parts[i].master_check && parts[i].sequence > 30 && parts[i].features[1].cold_mm)
+            *parts[i].features[1].cold_mm += 0.0015 * double(parts[i].sequence - 30);
+    const report::Lot lot = report::summarize_lot(parts, {});
+    const report::FeatureLot& h = lot.features[1];
+    ASSERT_TRUE(h.drift_at);
+    EXPECT_EQ(h.drift, quality::Drift::kUp);
+    EXPECT_GT(h.sequences[*h.drift_at], 30u);
+    EXPECT_NE(report::lot_report_html(lot, {}).find("drift warning, part"), std::string::npos);
+}
+
+TEST(LotReport, ReasonGroupDropsTheNumbersAndKeepsTheCauses) {
+    EXPECT_EQ(report::reason_group("degraded: measured with untrusted profiles; bottom profiles "
+                                   "0–1131 (0.000–1.131 s): accelerometer gap; bottom profiles "
+                                   "1221–1309 (1.221–1.309 s): no accelerometer samples"),
+              "degraded: measured with untrusted profiles (accelerometer gap, no accelerometer "
+              "samples)");
+    EXPECT_EQ(report::reason_group("not measured: edge not found"), "not measured: edge not found");
+}
+
+TEST(Aqdef, NotMeasuredIsAnEmptyValueNeverAZero) {
+    const std::string dfq = report::aqdef_dfq(lot_parts());
+    EXPECT_EQ(dfq.rfind("K0100 2\r\n", 0), 0u);
+    EXPECT_NE(dfq.find("K2110/1 69.2000\r\nK2111/1 69.8000\r\nK2142/1 mm\r\n"), std::string::npos);
+    // Part 50's Diameter 3: empty value, attribute 255, its reason.
+    const auto at = dfq.find("K0014/1 50\r\n");
+    ASSERT_NE(at, std::string::npos);
+    const auto block = dfq.rfind("K0001/1", at);
+    EXPECT_EQ(dfq.substr(block, 24), "K0001/1 \r\nK0002/1 255\r\nK");
+    EXPECT_EQ(count(dfq, "K0001/1 \r\n"), 1u);
+    EXPECT_EQ(count(dfq, "K0001/1 80."), 0u);  // the master check is left out
+    EXPECT_EQ(count(dfq, "K0001/1 "), 60u);
+    EXPECT_EQ(count(dfq, "K0002/1 255"), 2u);  // not measured and degraded
+    EXPECT_EQ(report::aqdef_time("2026-12-04T08:05:00.123+01:00"), "04.12.2026/08:05:00");
+}
+
+TEST(ReadParts, TimeRangeAndRetriedLines) {
+    test::TempDir dir;
+    auto line = [](int seq, const std::string& time, double v) {
+        return "{\"sequence\":" + std::to_string(seq) + ",\"time\":\"" + time +
+               "\",\"part\":{\"part_id\":\"P" + std::to_string(seq) +
+               "\",\"recipe\":\"hub-a\",\"verdict\":\"OK\",\"temperature_c\":1050,\"faces\":[1],"
+               "\"features\":[{\"name\":\"Height 1\",\"nominal_mm\":39.3,\"tolerance_mm\":[-0.3,"
+               "0.3],\"cold_mm\":" +
+               std::to_string(v) +
+               ",\"verdict\":\"OK\",\"reason\":null,"
+               "\"u_budget_mm\":{\"fit\":1}}]}}\n";
+    };
+    std::ofstream(dir.path / "2026-12-03.jsonl") << line(1, "2026-12-03T22:00:00.000+01:00", 39.1);
+    std::ofstream(dir.path / "2026-12-04.jsonl") << line(2, "2026-12-04T05:59:59.000+01:00", 39.2)
+                                                 << line(3, "2026-12-04T06:00:00.000+01:00", 39.3)
+                                                 << line(3, "2026-12-04T06:00:00.000+01:00", 39.35)
+                                                 << line(4, "2026-12-04T14:00:00.000+01:00", 39.4);
+    const auto all = results::read_parts(dir.path);
+    ASSERT_TRUE(all) << all.error().message;
+    ASSERT_EQ(all->parts.size(), 4u);
+    EXPECT_DOUBLE_EQ(*all->parts[2].features[0].cold_mm, 39.35);  // the retried line, once
+    const auto shift = results::read_parts(dir.path, {"2026-12-04T06", "2026-12-04T13"});
+    ASSERT_TRUE(shift);
+    ASSERT_EQ(shift->parts.size(), 1u);
+    EXPECT_EQ(shift->parts[0].sequence, 3u);
+    EXPECT_EQ(shift->files, 1u);  // the day before is not opened
+    std::ofstream(dir.path / "2026-12-04.jsonl", std::ios::app) << "{\"sequence\":5}\n";
+    const auto bad = results::read_parts(dir.path);
+    ASSERT_FALSE(bad);
+    EXPECT_NE(bad.error().message.find("2026-12-04.jsonl:5: not a result line"), std::string::npos)
+        << bad.error().message;
+}
