@@ -127,6 +127,7 @@ bench: build
 	$(BUILD)/tests/bench/hotgauge_bench_plc
 	/usr/bin/python3 tests/bench/daemon_latency.py $(BUILD) --parts 5
 	/usr/bin/python3 tests/bench/accel_loss.py $(BUILD) --recordings 4 --loss-seeds 2
+	/usr/bin/python3 tests/bench/lot_report.py $(BUILD)
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')
