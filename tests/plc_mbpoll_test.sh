@@ -75,7 +75,7 @@ h1=$(reg 0)
 for _ in $(seq 1 50); do [ "$(reg 0)" != "$h1" ] && break; sleep 0.05; done
 [ "$(reg 0)" != "$h1" ] || fail "heartbeat stalled at $h1"
 expect "state" "$(reg 1)" 1
-expect "map version" "$(reg 14)" 2
+expect "map version" "$(reg 14)" 3
 expect "feature 1 while IDLE" "$(reg 16 3:int -B)" -2147483648
 
 # Trigger: part id 1234 (uint32, big word order), recipe slot 1, all faces; then the command.

@@ -112,9 +112,9 @@ class Plc:
     def state(self):
         return self.inputs(1, 1)[0]
 
-    def trigger(self, part, slot=1, face=0):
-        """One FC16 of holding 0..5: command, part id, recipe slot, face, PLC heartbeat."""
-        self.write(0, [TRIGGER, *self.u32_registers(part), slot, face, part & 0xFFFF])
+    def trigger(self, part, slot=1, face=0, die=3):
+        """One FC16 of holding 0..6: command, part id, recipe slot, face, PLC heartbeat, die."""
+        self.write(0, [TRIGGER, *self.u32_registers(part), slot, face, part & 0xFFFF, die])
 
     def exception(self, response):
         assert response.isError(), f"expected an exception, got {response}"
@@ -156,7 +156,7 @@ def check_order(tmp, recipe, name, wordorder):
         wait_for(lambda: (plc.inputs(0, 1)[0] - h0) % 65536 >= 3, "the heartbeat to advance")
         plc.write(5, [321])
         assert plc.inputs(10, 1)[0] == 321, "PLC heartbeat echo"
-        assert plc.inputs()[1] == IDLE and plc.inputs()[14] == 2, "IDLE, map version 2"
+        assert plc.inputs()[1] == IDLE and plc.inputs()[14] == 3, "IDLE, map version 3"
 
         # A full cycle, with a refused trigger while BUSY.
         part = 4242 + 70000  # above 65535: both words of the part id carry bits
@@ -234,7 +234,8 @@ def check_order(tmp, recipe, name, wordorder):
         # Exceptions, and the connection stays usable after each.
         c = plc.client
         assert plc.exception(c.read_input_registers(N_INPUTS, 1, slave=UNIT)) == 2
-        assert plc.exception(c.read_holding_registers(6, 1, slave=UNIT)) == 2
+        assert plc.exception(c.read_holding_registers(7, 1, slave=UNIT)) == 2
+        assert plc.exception(c.write_register(7, 1, slave=UNIT)) == 2
         assert plc.exception(c.write_register(100, 1, slave=UNIT)) == 2
         assert plc.exception(c.read_input_registers(0, 126, slave=UNIT)) == 3
         assert plc.exception(c.read_coils(0, 8, slave=UNIT)) == 1

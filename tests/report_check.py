@@ -179,6 +179,25 @@ def check_lot_report(bin_dir, results_dir, work):
     print(f"lot report: {len(classes)} charts rendered in Chromium, none blank ({html}, {png})")
 
 
+def check_daemon_report(results_dir):
+    """The daemon's own files: the drift state with every production result (the line has too
+    few parts for a baseline: BASELINE for every feature), and the day's lot report, which it
+    rewrites after every part, rendering in Chromium."""
+    for line in result_lines(results_dir):
+        if "verification" in line:
+            continue
+        names = [f["name"] for f in line["part"]["features"]]
+        assert sorted(line["drift"]) == sorted(names), line["drift"]
+        assert set(line["drift"].values()) == {"BASELINE"}, line["drift"]
+        assert line["die"] == 0, line["die"]
+    pages = sorted(n for n in os.listdir(results_dir) if n.endswith(".report.html"))
+    assert pages, f"{results_dir}: no day's lot report"
+    seen, png = check_page(os.path.join(results_dir, pages[-1]),
+                           ink={"chart": (31, 95, 168), "histogram": (111, 159, 216)})
+    assert [c for c, _ in seen["svg"]].count("chart") > 0, seen["svg"]
+    print(f"daemon: drift state with every result; its lot report renders ({pages[-1]}, {png})")
+
+
 def main():
     bin_dir, results_dir, work = sys.argv[1:4]
     os.makedirs(work, exist_ok=True)

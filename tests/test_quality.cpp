@@ -225,3 +225,30 @@ TEST(WesternElectric, MarksThePointThatCompletesEachRule) {
     // 3.5σ in the middle of a run above: rule 1, and rule 4 at its 8th point.
     EXPECT_EQ(marks({0.2, 0.2, 0.2, 3.5, 0.2, 0.2, 0.2, 0.2}), (Marks{{3, 1}, {7, 4}}));
 }
+
+// The daemon's drift watch: per die, a baseline, then the EWMA; dies apart; values skipped.
+TEST(DriftWatch, BaselineThenWatchPerDie) {
+    quality::DriftWatch watch({.baseline = 30});
+    std::mt19937 rng(11);
+    std::normal_distribution<double> noise(0.0, 0.01);
+    using quality::Watch;
+    for (int i = 0; i < 29; ++i)
+        EXPECT_EQ(watch.add(1, "hub-a", "Diameter 3", 69.5 + noise(rng)), Watch::kBaseline);
+    EXPECT_EQ(watch.add(1, "hub-a", "Diameter 3", std::nullopt), Watch::kBaseline);  // skipped
+    EXPECT_EQ(watch.add(1, "hub-a", "Diameter 3", 69.5 + noise(rng)), Watch::kWatching);
+    // Die 1 wears 5 µm per 100 parts; die 2 (the same feature) does not.
+    int warned_at = -1;
+    for (int i = 0; i < 1000 && warned_at < 0; ++i) {
+        if (watch.add(1, "hub-a", "Diameter 3", 69.5 + 5e-5 * i + noise(rng)) == Watch::kUp)
+            warned_at = i;
+        watch.add(2, "hub-a", "Diameter 3", 69.5 + noise(rng));
+    }
+    EXPECT_GT(warned_at, 50);
+    EXPECT_LT(warned_at, 600);  // at most 30 µm into a drift that takes ~6 000 parts to a NOK
+    EXPECT_EQ(watch.state(1, "hub-a", "Diameter 3"), Watch::kUp);
+    EXPECT_EQ(watch.state(2, "hub-a", "Diameter 3"), Watch::kWatching);
+    EXPECT_EQ(watch.state(3, "hub-a", "Diameter 3"), Watch::kBaseline);
+    // A baseline that does not vary sets no limits: a new one is collected.
+    for (int i = 0; i < 30; ++i) watch.add(4, "hub-a", "Height 1", 39.3);
+    EXPECT_EQ(watch.state(4, "hub-a", "Height 1"), Watch::kBaseline);
+}

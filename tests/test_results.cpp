@@ -59,19 +59,25 @@ TEST(ResultsLog, CsvOpensInASpreadsheetAndJsonLinesCarryEverything) {
     ASSERT_TRUE(log.ok()) << log.error().message;
     const auto a = part("A-1", 3, 60.0), b = part("B,\"2\"", 3, 60.0);  // a hostile part id
     ASSERT_TRUE(log->append({kNoon, 41, &a, "0.1.0", "cfg1234", std::nullopt}).ok());
-    ASSERT_TRUE(log->append({kNoon + 1'000'000'000, 42, &b, "0.1.0", "cfg1234", "archive/x"}).ok());
+    results::ResultEntry eb{kNoon + 1'000'000'000, 42, &b, "0.1.0", "cfg1234", "archive/x"};
+    eb.die_id = 7;
+    eb.drift = {
+        {"Diameter 1", "DRIFT_UP"}, {"Diameter 2", "WATCHING"}, {"Diameter 3", "DRIFT_DOWN"}};
+    ASSERT_TRUE(log->append(eb).ok());
     const auto csv = log->last_csv();
     EXPECT_EQ(csv.filename().string(), results::local_date(kNoon) + ".csv");
     const auto rows = lines(csv);
     ASSERT_EQ(rows.size(), 3u);
-    EXPECT_EQ(rows[0].rfind("time,sequence,part_id,recipe,temperature_c,verdict,degraded,", 0), 0u);
+    EXPECT_EQ(
+        rows[0].rfind("time,sequence,part_id,recipe,temperature_c,verdict,degraded,drift,", 0), 0u);
     // An independent reader: every row has the header's columns, the quoted id survives.
     const std::string check =
         std::string(HOTGAUGE_PYTHON) +
         " -c \"import csv,sys; r=list(csv.reader(open(sys.argv[1]))); " +
         "assert all(len(x)==len(r[0]) for x in r), [len(x) for x in r]; " +
         "assert r[2][2]=='B,\\\"2\\\"', r[2][2]; " +
-        "assert r[1][7]=='60.0123' and r[1][10]=='' and r[1][12]=='NOT_MEASURED', r[1]\" " +
+        "assert r[1][8]=='60.0123' and r[1][11]=='' and r[1][13]=='NOT_MEASURED', r[1]; " +
+        "assert r[1][7]=='' and r[2][7]=='Diameter 1 DRIFT_UP; Diameter 3 DRIFT_DOWN', r[2]\" " +
         csv.string();
     EXPECT_EQ(std::system(check.c_str()), 0) << check;
 
@@ -81,6 +87,8 @@ TEST(ResultsLog, CsvOpensInASpreadsheetAndJsonLinesCarryEverything) {
     EXPECT_EQ(j["sequence"], 42);
     EXPECT_EQ(j["config_hash"], "cfg1234");
     EXPECT_EQ(j["archived_as"], "archive/x");
+    EXPECT_EQ(j["die"], 7);
+    EXPECT_EQ(j["drift"]["Diameter 2"], "WATCHING");
     EXPECT_EQ(j["part"]["part_id"], "B,\"2\"");
     EXPECT_EQ(j["part"]["features"][1]["reason"], "edge not found, arc 12° < 30°");
 }

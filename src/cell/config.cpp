@@ -277,8 +277,9 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
         }
         if (const YAML::Node r = root["results"]) {
             const std::string w = "results";
-            y.expect_map(
-                r, w, {"dir", "archive_dir", "archive_quota_gb", "archive_every_nth_ok", "sync"});
+            y.expect_map(r, w,
+                         {"dir", "archive_dir", "archive_quota_gb", "archive_every_nth_ok", "sync",
+                          "drift_baseline", "lot_report"});
             if (r["dir"]) c.results.dir = base / y.string(r["dir"], w + ".dir");
             if (r["archive_dir"])
                 c.archive.dir = base / y.string(r["archive_dir"], w + ".archive_dir");
@@ -287,6 +288,14 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
             c.archive.every_nth_ok =
                 integer_in(y, r, w, "archive_every_nth_ok", 0, 1'000'000, c.archive.every_nth_ok);
             if (r["sync"]) c.results.sync = y.boolean(r["sync"], w + ".sync");
+            if (r["lot_report"])
+                c.quality.lot_report = y.boolean(r["lot_report"], w + ".lot_report");
+            const int baseline = integer_in(y, r, w, "drift_baseline", 0, 100'000,
+                                            static_cast<int>(c.quality.drift_baseline));
+            if (baseline > 0 && baseline < static_cast<int>(quality::kMinBaseline))
+                y.fail(r["drift_baseline"], w + ".drift_baseline: 0 (no drift watch) or at least " +
+                                                std::to_string(quality::kMinBaseline));
+            c.quality.drift_baseline = static_cast<std::size_t>(baseline);
         }
         return c;
     });

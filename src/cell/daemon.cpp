@@ -13,6 +13,7 @@
 #include "hotgauge/accel/source.hpp"
 #include "hotgauge/cell/axis.hpp"
 #include "hotgauge/cell/journal.hpp"
+#include "hotgauge/cell/quality_feed.hpp"
 #include "hotgauge/core/clock.hpp"
 #include "hotgauge/io/certificate.hpp"
 #include "hotgauge/io/model_io.hpp"
@@ -115,6 +116,17 @@ plc::PartResult to_plc(const pipeline::PartResult& r, const pipeline::Verificati
                 ? plc::Verdict::kOk
                 : out.overall;
     return out;
+}
+
+// The drift watch's state of each feature (results::ResultEntry::drift) into the registers.
+void set_drift(plc::PartResult& p, const std::vector<std::pair<std::string, std::string>>& drift) {
+    for (auto& v : p.features)
+        for (const auto& [name, state] : drift)
+            if (name == v.name)
+                v.drift = state == "DRIFT_UP"     ? plc::DriftState::kUp
+                          : state == "DRIFT_DOWN" ? plc::DriftState::kDown
+                          : state == "WATCHING"   ? plc::DriftState::kWatching
+                                                  : plc::DriftState::kNone;
 }
 
 std::string verdict_text(const pipeline::PartResult& r, const pipeline::Verification* check) {
@@ -279,7 +291,8 @@ struct Daemon::Impl {
     std::shared_ptr<const Setup> proc_setup;
     std::optional<results::ResultsLog> log;
     std::optional<results::RawArchive> archive;
-    std::string log_error;  // why the results files could not be opened
+    std::optional<QualityFeed> quality;  // drift watch, the day's lot report
+    std::string log_error;               // why the results files could not be opened
 
     static std::int64_t steady_ns() {
         return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
@@ -321,9 +334,8 @@ struct Daemon::Impl {
     void process(Captured c);
     pipeline::PartResult measure_captured(Captured& c) const;
     // The registers: the result, or the fault; returns the outcome for the log.
-    std::string publish(const Captured& c, const pipeline::PartResult& r,
-                        const pipeline::Verification* check, const core::Result<void>& stored,
-                        bool& problem);
+    std::string publish(const Captured& c, const results::ResultEntry& entry,
+                        const core::Result<void>& stored, bool& problem);
     void prepare_results(const std::shared_ptr<const Setup>& s);
     void finish_failed(Captured& c, pipeline::PartResult& r);
 };
@@ -678,7 +690,9 @@ void Daemon::Impl::prepare_results(const std::shared_ptr<const Setup>& s) {
     if (proc_setup && proc_setup->config.results.dir == s->config.results.dir &&
         proc_setup->config.archive.dir == s->config.archive.dir &&
         proc_setup->config.archive.quota_bytes == s->config.archive.quota_bytes &&
-        proc_setup->config.archive.every_nth_ok == s->config.archive.every_nth_ok && log) {
+        proc_setup->config.archive.every_nth_ok == s->config.archive.every_nth_ok &&
+        proc_setup->config.quality.drift_baseline == s->config.quality.drift_baseline &&
+        proc_setup->config.quality.lot_report == s->config.quality.lot_report && log) {
         proc_setup = s;
         return;
     }
@@ -696,6 +710,8 @@ void Daemon::Impl::prepare_results(const std::shared_ptr<const Setup>& s) {
         archive.emplace(std::move(*a));
     else
         spdlog::error("raw archive: {}", a.error().message);
+    quality.emplace(s->config.results.dir, s->config.quality);
+    quality->load(core::realtime_ns());
 }
 
 namespace {
@@ -769,10 +785,11 @@ pipeline::PartResult Daemon::Impl::measure_captured(Captured& c) const {
     return r;
 }
 
-std::string Daemon::Impl::publish(const Captured& c, const pipeline::PartResult& r,
-                                  const pipeline::Verification* check,
+std::string Daemon::Impl::publish(const Captured& c, const results::ResultEntry& entry,
                                   const core::Result<void>& stored, bool& problem) {
     const Job& job = c.job;
+    const pipeline::PartResult& r = *entry.result;
+    const pipeline::Verification* check = entry.verification;
     problem = true;
     if (abandoned == job.sequence) {
         // The PLC reset this cycle and has moved on: neither a result nor a fault of it may
@@ -791,6 +808,7 @@ std::string Daemon::Impl::publish(const Captured& c, const pipeline::PartResult&
                plc::to_string(static_cast<plc::ErrorCode>(c.fault)) + "): " + c.failure;
     }
     plc::PartResult published = to_plc(r, check);
+    set_drift(published, entry.drift);
     published.sequence = job.sequence;
     if (auto ok = server->finish(job.trigger.trigger_id, published); !ok)
         return verdict_text(r, check) + ", not published: " + ok.error().message;
@@ -837,6 +855,8 @@ void Daemon::Impl::process(Captured c) {
     entry.verification = verification ? &*verification : nullptr;
     entry.software_version = HOTGAUGE_VERSION;
     entry.config_hash = job.setup->config.hash;
+    entry.die_id = job.trigger.die_id;
+    if (quality && !is_master && !c.fault) entry.drift = quality->observe(entry.die_id, r);
     // The raw recording is written after the registers (it is large, and the PLC is waiting);
     // the results line names the folder it goes to, and a failure to write it is logged.
     const bool archiving = !c.fault && archive && archive->wants(r, job.sequence);
@@ -851,14 +871,14 @@ void Daemon::Impl::process(Captured c) {
 
     // Registers last: a result the PLC can acknowledge is already on disk.
     bool problem = true;
-    const std::string outcome =
-        publish(c, r, verification ? &*verification : nullptr, stored, problem);
+    const std::string outcome = publish(c, entry, stored, problem);
     const std::int64_t published = core::realtime_ns();
     if (archiving) {
         if (auto where = archive->store(c.rec, job.sequence, t_result); !where)
             spdlog::error("seq {}: raw archive: {} (the results line names {})", job.sequence,
                           where.error().message, *entry.archived_as);
     }
+    if (quality && stored) quality->stored(results::jsonl_line(entry), t_result);
     {
         std::lock_guard lock(stats_mutex);
         stats.last = PartTiming{job.sequence,    c.last_profile_ns, published,

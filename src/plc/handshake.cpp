@@ -67,6 +67,7 @@ void Handshake::set_state(State s) {
 void Handshake::clear_result() {
     inputs_[ir::kOverallVerdict] = static_cast<std::uint16_t>(Verdict::kNone);
     inputs_[ir::kFeatureCount] = 0;
+    inputs_[ir::kDriftCount] = 0;
     inputs_[ir::kTemperature] = std::bit_cast<std::uint16_t>(kInvalidInt16);
     const auto invalid = encode_i32(kInvalidInt32, order_);
     const auto nan = encode_f32(std::nanf(""), order_);
@@ -77,7 +78,7 @@ void Handshake::clear_result() {
         inputs_[a + ir::kValueMm] = nan[0];
         inputs_[a + ir::kValueMm + 1] = nan[1];
         inputs_[a + ir::kVerdict] = static_cast<std::uint16_t>(Verdict::kNone);
-        inputs_[a + ir::kVerdict + 1] = 0;
+        inputs_[a + ir::kDrift] = static_cast<std::uint16_t>(DriftState::kNone);
     }
 }
 
@@ -124,6 +125,7 @@ PlcEvent Handshake::start_cycle() {
     e.trigger.part_id = decode_u32(holding_[hr::kPartId], holding_[hr::kPartId + 1], order_);
     e.trigger.recipe_slot = holding_[hr::kRecipeSlot];
     e.trigger.face = static_cast<Face>(holding_[hr::kFace]);
+    e.trigger.die_id = holding_[hr::kDieId];
     clear_result();
     put32(ir::kPartId, e.trigger.part_id);
     inputs_[ir::kRecipeSlot] = e.trigger.recipe_slot;
@@ -157,6 +159,7 @@ core::Result<void> Handshake::finish(std::uint32_t trigger_id, const PartResult&
         fault(static_cast<std::uint16_t>(ErrorCode::kInternal));
         return ok;
     }
+    std::uint16_t drifting = 0;
     for (const auto& f : result.features) {
         const std::uint16_t a = ir::feature(f.slot);
         const std::int32_t um = to_um(f.value_mm);
@@ -168,7 +171,10 @@ core::Result<void> Handshake::finish(std::uint32_t trigger_id, const PartResult&
         inputs_[a + ir::kValueMm] = m[0];
         inputs_[a + ir::kValueMm + 1] = m[1];
         inputs_[a + ir::kVerdict] = static_cast<std::uint16_t>(f.verdict);
+        inputs_[a + ir::kDrift] = static_cast<std::uint16_t>(f.drift);
+        drifting += f.drift == DriftState::kUp || f.drift == DriftState::kDown ? 1 : 0;
     }
+    inputs_[ir::kDriftCount] = drifting;
     inputs_[ir::kFeatureCount] = static_cast<std::uint16_t>(result.features.size());
     inputs_[ir::kOverallVerdict] = static_cast<std::uint16_t>(result.overall);
     inputs_[ir::kTemperature] = std::bit_cast<std::uint16_t>(to_decicelsius(result.temperature_c));

@@ -147,6 +147,8 @@ const std::vector<Row>& plc_rows() {
         {hr::kRecipeSlot, 1, "uint16", "recipe slot", "recipe to measure with, 1..65535"},
         {hr::kFace, 1, "uint16", "face", "0 all faces, 1 top, 2 bottom, 3 side1, 4 side2"},
         {hr::kPlcHeartbeat, 1, "uint16", "PLC heartbeat", "any changing value; echoed at input 10"},
+        {hr::kDieId, 1, "uint16", "die id",
+         "the die that forged the part, 0 unknown; drift is watched per die"},
     };
     return rows;
 }
@@ -173,7 +175,9 @@ const std::vector<Row>& status_rows() {
         {ir::kFeatureCount, 1, "uint16", "feature count", "features in the result, 0 when none"},
         {ir::kTemperature, 1, "int16", "part temperature",
          "0.1 °C (10500 = 1050.0 °C); -32768 unknown"},
-        {ir::kMapVersionReg, 1, "uint16", "map version", "2 for this map"},
+        {ir::kMapVersionReg, 1, "uint16", "map version", "3 for this map"},
+        {ir::kDriftCount, 1, "uint16", "drift warnings",
+         "features of the result whose die is drifting (drift 2 or 3), 0 when none"},
     };
     return rows;
 }
@@ -201,12 +205,12 @@ std::string map_markdown() {
           << range(40001u + hr::kMirrorBase + r.address, r.words) << " | " << r.type << " | "
           << r.name << " | " << r.meaning << " |\n";
     o << "\n";
-    o << "| Feature slot | Input (0-based): µm int32 / mm float32 / verdict | 3xxxx | "
+    o << "| Feature slot | Input (0-based): µm int32 / mm float32 / verdict / drift | 3xxxx | "
          "Holding mirror 4xxxx |\n";
     o << "| --- | --- | --- | --- |\n";
     auto triple = [](std::uint32_t base) {
         return range(base + ir::kValueUm, 2) + " / " + range(base + ir::kValueMm, 2) + " / " +
-               std::to_string(base + ir::kVerdict);
+               std::to_string(base + ir::kVerdict) + " / " + std::to_string(base + ir::kDrift);
     };
     for (int slot = 1; slot <= kMaxFeatures; ++slot) {
         const std::uint32_t a = ir::feature(slot);

@@ -1,5 +1,6 @@
 #include "hotgauge/quality/drift.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -21,7 +22,6 @@ const char* to_string(Drift d) {
 
 core::Result<DriftMonitor> DriftMonitor::from_baseline(std::span<const double> baseline,
                                                        const DriftConfig& config) {
-    constexpr std::size_t kMinBaseline = 20;
     if (baseline.size() < kMinBaseline)
         return core::make_error("drift baseline: need at least " + std::to_string(kMinBaseline) +
                                 " values, got " + std::to_string(baseline.size()));
@@ -50,6 +50,58 @@ Drift DriftMonitor::add(double value) {
     const double off = z_ - mean_, lim = limit();
     state_ = off > lim ? Drift::kUp : off < -lim ? Drift::kDown : Drift::kNone;
     return state_;
+}
+
+const char* to_string(Watch w) {
+    switch (w) {
+        case Watch::kBaseline:
+            return "BASELINE";
+        case Watch::kWatching:
+            return "WATCHING";
+        case Watch::kUp:
+            return "DRIFT_UP";
+        case Watch::kDown:
+            return "DRIFT_DOWN";
+    }
+    return "?";
+}
+
+DriftWatch::DriftWatch(DriftWatchConfig config) : config_(config) {
+    config_.baseline = std::max(config_.baseline, kMinBaseline);
+}
+
+Watch DriftWatch::state_of(const Series& s) const {
+    if (!s.monitor) return Watch::kBaseline;
+    switch (s.monitor->state()) {
+        case Drift::kUp:
+            return Watch::kUp;
+        case Drift::kDown:
+            return Watch::kDown;
+        case Drift::kNone:
+            break;
+    }
+    return Watch::kWatching;
+}
+
+Watch DriftWatch::add(int die, const std::string& recipe, const std::string& feature,
+                      std::optional<double> value) {
+    Series& s = series_[{die, recipe, feature}];
+    if (!value || !std::isfinite(*value)) return state_of(s);
+    if (s.monitor) {
+        s.monitor->add(*value);
+        return state_of(s);
+    }
+    s.baseline.push_back(*value);
+    if (s.baseline.size() < config_.baseline) return Watch::kBaseline;
+    // A baseline that does not vary cannot set limits: collect a new one.
+    if (auto m = DriftMonitor::from_baseline(s.baseline, config_.ewma)) s.monitor = *m;
+    s.baseline.clear();
+    return state_of(s);
+}
+
+Watch DriftWatch::state(int die, const std::string& recipe, const std::string& feature) const {
+    const auto it = series_.find({die, recipe, feature});
+    return it == series_.end() ? Watch::kBaseline : state_of(it->second);
 }
 
 }  // namespace hotgauge::quality

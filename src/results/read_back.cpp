@@ -64,6 +64,7 @@ PartRecord part_of(const json& line) {
     p.time_ns = line.value("time_ns", std::int64_t{0});
     p.time = line.value("time", "");
     p.master_check = line.contains("verification");
+    p.die = line.value("die", 0);
     const json& part = line.at("part");
     p.part_id = part.value("part_id", "");
     p.recipe = part.value("recipe", "");
@@ -92,7 +93,7 @@ core::Result<void> read_file(const std::filesystem::path& path, const TimeRange&
         ++out.lines;
         PartRecord p;
         try {
-            p = part_of(json::parse(text, keep));
+            p = parse_result_line(text);
         } catch (const json::exception& e) {
             return core::make_error(path.string() + ":" + std::to_string(n) +
                                     ": not a result line: " + e.what());
@@ -109,6 +110,8 @@ core::Result<void> read_file(const std::filesystem::path& path, const TimeRange&
 }
 
 }  // namespace
+
+PartRecord parse_result_line(const std::string& line) { return part_of(json::parse(line, keep)); }
 
 bool TimeRange::contains(const std::string& time) const {
     if (!from.empty() && time.compare(0, from.size(), from) < 0) return false;

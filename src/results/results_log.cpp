@@ -76,7 +76,7 @@ std::string local_date(std::int64_t time_ns) {
 }
 
 std::string csv_header(const pipeline::PartResult& r) {
-    std::string h = "time,sequence,part_id,recipe,temperature_c,verdict,degraded";
+    std::string h = "time,sequence,part_id,recipe,temperature_c,verdict,degraded,drift";
     for (const auto& f : r.measurement.features) {
         h += "," + cell(f.name + " value_mm");
         h += "," + cell(f.name + " deviation_mm");
@@ -91,6 +91,11 @@ std::string csv_row(const ResultEntry& e) {
     std::string row = local_iso8601(e.time_ns) + "," + std::to_string(e.sequence) + "," +
                       cell(r.part_id) + "," + cell(r.recipe) + "," + number(m.temperature_c, 1) +
                       "," + measure::to_string(m.verdict) + "," + (r.degraded ? "yes" : "no");
+    std::string drifting;  // "Diameter 3 DRIFT_UP; …": the features the watch warns of
+    for (const auto& [name, state] : e.drift)
+        if (state.rfind("DRIFT", 0) == 0)
+            drifting += (drifting.empty() ? "" : "; ") + name + " " + state;
+    row += "," + cell(drifting);
     for (const auto& f : m.features) {
         // The value a quality engineer compares with the drawing: cold, in mm.
         row += "," + number(f.cold_mm, 4) + "," + number(f.deviation_mm, 4) + "," +
@@ -140,6 +145,9 @@ std::string jsonl_line(const ResultEntry& e) {
     j["software_version"] = e.software_version;
     j["config_hash"] = e.config_hash;
     j["archived_as"] = e.archived_as ? nlohmann::json(*e.archived_as) : nlohmann::json();
+    j["die"] = e.die_id;
+    j["drift"] = nlohmann::json::object();
+    for (const auto& [name, state] : e.drift) j["drift"][name] = state;
     j["part"] = nlohmann::json::parse(pipeline::to_json(*e.result));
     if (e.verification)
         j["verification"] = nlohmann::json::parse(pipeline::to_json(*e.verification));

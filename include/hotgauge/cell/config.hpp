@@ -14,6 +14,7 @@
 #include "hotgauge/acquire/camera.hpp"
 #include "hotgauge/acquire/scan.hpp"
 #include "hotgauge/acquire/session.hpp"
+#include "hotgauge/cell/quality_feed.hpp"
 #include "hotgauge/core/result.hpp"
 #include "hotgauge/plc/pyrometer.hpp"
 #include "hotgauge/plc/server.hpp"
@@ -55,7 +56,8 @@ struct DaemonConfig {
     std::optional<plc::PyrometerConfig> pyrometer;  // absent: the temperature comes from nowhere
     results::ResultsConfig results;
     results::ArchiveConfig archive;
-    std::string hash;  // of the file's bytes: goes with every result
+    QualityConfig quality;  // results.drift_baseline, results.lot_report
+    std::string hash;       // of the file's bytes: goes with every result
 };
 
 // Reads and validates; errors name file:line and the key. Referenced files (recipes, models,

@@ -26,6 +26,7 @@ struct FeatureValue {
     int slot = 0;                             // register block 1..kMaxFeatures
     std::optional<double> value_mm;           // absent: not measured (verdict must say so)
     Verdict verdict = Verdict::kNotMeasured;  // kOk, kNok, kNotMeasured or kDegraded
+    DriftState drift = DriftState::kNone;
 };
 
 struct PartResult {
@@ -52,6 +53,7 @@ struct TriggerRequest {
     std::uint32_t part_id = 0;
     std::uint16_t recipe_slot = 0;
     Face face = Face::kAll;
+    std::uint16_t die_id = 0;  // 0: the PLC does not say
 };
 
 // What the owner must act on: a trigger to measure, or a reset (abandon the cycle, clear the

@@ -15,10 +15,11 @@
 namespace hotgauge::plc {
 
 // 2: per-feature verdict 4 degraded (a value the data cannot vouch for), docs/plc-modbus.md.
-inline constexpr std::uint16_t kMapVersion = 2;
+// 3: die id (holding 6), the drift warning per feature and its count (input 15).
+inline constexpr std::uint16_t kMapVersion = 3;
 inline constexpr int kMaxFeatures = 16;
 
-// Holding registers: 0..5 are written by the PLC (the only writable block); the input registers
+// Holding registers: 0..6 are written by the PLC (the only writable block); the input registers
 // are mirrored read-only at kMirrorBase + address for PLCs that only read holding registers.
 namespace hr {
 inline constexpr std::uint16_t kCommand = 0;     // Command; reads back 0 once taken
@@ -26,7 +27,8 @@ inline constexpr std::uint16_t kPartId = 1;      // uint32, 2 registers
 inline constexpr std::uint16_t kRecipeSlot = 3;  // 1..65535
 inline constexpr std::uint16_t kFace = 4;        // Face
 inline constexpr std::uint16_t kPlcHeartbeat = 5;
-inline constexpr std::uint16_t kWritableCount = 6;
+inline constexpr std::uint16_t kDieId = 6;  // which die forged the part: drift is watched per die
+inline constexpr std::uint16_t kWritableCount = 7;
 inline constexpr std::uint16_t kMirrorBase = 100;
 }  // namespace hr
 
@@ -46,12 +48,14 @@ inline constexpr std::uint16_t kOverallVerdict = 11;
 inline constexpr std::uint16_t kFeatureCount = 12;  // features in the result, 0 when none
 inline constexpr std::uint16_t kTemperature = 13;   // int16, 0.1 °C; kInvalidInt16 if unknown
 inline constexpr std::uint16_t kMapVersionReg = 14;
+inline constexpr std::uint16_t kDriftCount = 15;  // features of the result in DRIFT_UP/DOWN
 inline constexpr std::uint16_t kFeatureBase = 16;
 inline constexpr std::uint16_t kFeatureStride = 6;
 // Offsets inside one feature block.
 inline constexpr std::uint16_t kValueUm = 0;  // int32 µm, kInvalidInt32 if not measured
 inline constexpr std::uint16_t kValueMm = 2;  // float32 mm, NaN if not measured
 inline constexpr std::uint16_t kVerdict = 4;  // Verdict
+inline constexpr std::uint16_t kDrift = 5;    // Drift
 inline constexpr std::uint16_t kCount = kFeatureBase + kMaxFeatures * kFeatureStride;  // 112
 
 // First register of feature `slot` (1-based).
@@ -73,6 +77,9 @@ enum class Verdict : std::uint16_t {
     kNotMeasured = 3,
     kDegraded = 4
 };
+// Per feature, the drift warning of its die (docs/quality.md "In the daemon"): kNone while the
+// baseline is collected (or no value), kWatching, kUp / kDown while the EWMA is beyond its limit.
+enum class DriftState : std::uint16_t { kNone = 0, kWatching = 1, kUp = 2, kDown = 3 };
 enum class Face : std::uint16_t { kAll = 0, kTop = 1, kBottom = 2, kSide1 = 3, kSide2 = 4 };
 inline constexpr std::uint16_t kMaxFace = 4;
 

@@ -2,11 +2,18 @@
 // Drift warning (issue 19, docs/quality.md "Drift warning"): an EWMA chart of a feature's values
 // against its baseline, which sees a die wearing long before its parts leave the tolerance.
 #include <cstddef>
+#include <map>
+#include <optional>
 #include <span>
+#include <string>
+#include <tuple>
+#include <vector>
 
 #include "hotgauge/core/result.hpp"
 
 namespace hotgauge::quality {
+
+inline constexpr std::size_t kMinBaseline = 20;  // values a baseline needs at least
 
 struct DriftConfig {
     double lambda = 0.05;  // weight of the newest value
@@ -43,6 +50,37 @@ class DriftMonitor {
     double z_;
     std::size_t n_ = 0;
     Drift state_ = Drift::kNone;
+};
+
+// Drift warnings of a production line: one DriftMonitor per die, recipe and feature, each on
+// a baseline of its first `baseline` values (the daemon's; docs/quality.md "In the daemon").
+// A new die id starts new baselines; a die seen before goes on where it was.
+enum class Watch { kBaseline, kWatching, kUp, kDown };
+const char* to_string(Watch w);
+
+struct DriftWatchConfig {
+    std::size_t baseline = 50;  // values per die and feature before watching; at least 20
+    DriftConfig ewma;
+};
+
+class DriftWatch {
+  public:
+    explicit DriftWatch(DriftWatchConfig config = {});
+    // The next value of a feature (nullopt: not measured, or not to be used: skipped), and the
+    // feature's state after it.
+    Watch add(int die, const std::string& recipe, const std::string& feature,
+              std::optional<double> value);
+    Watch state(int die, const std::string& recipe, const std::string& feature) const;
+    const DriftWatchConfig& config() const { return config_; }
+
+  private:
+    struct Series {
+        std::vector<double> baseline;
+        std::optional<DriftMonitor> monitor;
+    };
+    Watch state_of(const Series& s) const;
+    DriftWatchConfig config_;
+    std::map<std::tuple<int, std::string, std::string>, Series> series_;
 };
 
 }  // namespace hotgauge::quality

@@ -22,7 +22,7 @@ struct LotOptions {
     std::size_t baseline = 25;
     std::string title = "Lot report";
 };
-inline constexpr std::size_t kMinBaseline = 20;  // DriftMonitor's minimum, and the charts'
+inline constexpr std::size_t kMinBaseline = quality::kMinBaseline;  // the charts' too
 
 // One feature over the lot. Statistics use the values with verdict OK or NOK; degraded values
 // (measured with untrusted data) are counted and listed, not used.

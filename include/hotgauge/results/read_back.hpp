@@ -32,6 +32,7 @@ struct PartRecord {
     std::string part_id, recipe, verdict;
     std::optional<double> temperature_c;
     bool master_check = false;
+    int die = 0;                          // the die the PLC named, 0 when none
     std::vector<FeatureRecord> features;  // in recipe order
 };
 
@@ -42,6 +43,10 @@ struct TimeRange {
     std::string from, to;
     bool contains(const std::string& time) const;
 };
+
+// One line of a day file as a PartRecord; throws nlohmann::json::exception when it is not a
+// result line. For the daemon's own lines (the lot report it keeps).
+PartRecord parse_result_line(const std::string& line);
 
 struct PartsRead {
     std::vector<PartRecord> parts;  // in file order (days by name), one per sequence number

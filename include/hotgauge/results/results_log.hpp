@@ -13,6 +13,8 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "hotgauge/core/result.hpp"
 #include "hotgauge/pipeline/pipeline.hpp"
@@ -36,6 +38,10 @@ struct ResultEntry {
     // A master part's check (docs/verification.md): its row goes to YYYY-MM-DD.verification.csv
     // and its JSON line carries "verification".
     const pipeline::Verification* verification = nullptr;
+    int die_id = 0;  // the die the PLC named (0: not named)
+    // The drift watch's state per feature after this part (docs/quality.md "In the daemon"):
+    // feature name -> BASELINE, WATCHING, DRIFT_UP, DRIFT_DOWN. Empty: no watch.
+    std::vector<std::pair<std::string, std::string>> drift;
 };
 
 // Thread safety: one thread appends.

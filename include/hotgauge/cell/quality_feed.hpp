@@ -1,0 +1,47 @@
+#pragma once
+// What the daemon keeps for the quality engineer beside the results files (docs/quality.md
+// "In the daemon"): the drift watch per die, recipe and feature, whose state goes with every
+// result (results files, PLC registers), and the day's lot report, rewritten after every part.
+// Processing thread only.
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "hotgauge/pipeline/pipeline.hpp"
+#include "hotgauge/quality/drift.hpp"
+#include "hotgauge/results/read_back.hpp"
+
+namespace hotgauge::cell {
+
+struct QualityConfig {
+    std::size_t drift_baseline = 50;  // values per die and feature before watching; 0: no watch
+    bool lot_report = true;           // results/YYYY-MM-DD.report.html
+};
+
+class QualityFeed {
+  public:
+    QualityFeed(const std::filesystem::path& results_dir, const QualityConfig& config);
+
+    // The drift watch from the last 3 day files, and today's parts for the report (start and
+    // reload): what a restart would otherwise forget. Bad lines are logged and skipped.
+    void load(std::int64_t now_ns);
+    // Each feature's drift state after this production part (features measured OK or NOK feed
+    // the watch; the others keep their state). Empty without a watch.
+    std::vector<std::pair<std::string, std::string>> observe(int die,
+                                                             const pipeline::PartResult& r);
+    // The part's results line, once stored: today's report rewritten (write, then rename, so a
+    // reader never sees half a page). A failure is logged; measuring goes on.
+    void stored(const std::string& jsonl_line, std::int64_t time_ns);
+
+  private:
+    void write_report() const;
+    std::filesystem::path dir_;
+    QualityConfig config_;
+    std::optional<quality::DriftWatch> watch_;
+    std::string today_;  // local date of the parts below
+    std::vector<results::PartRecord> parts_;
+};
+
+}  // namespace hotgauge::cell

@@ -1,0 +1,110 @@
+#include "hotgauge/cell/quality_feed.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "hotgauge/report/lot_report.hpp"
+#include "hotgauge/results/results_log.hpp"
+
+namespace hotgauge::cell {
+namespace {
+
+// The value a feature gives the watch: measured OK or NOK (a degraded value is not trusted).
+std::optional<double> watched(const results::FeatureRecord& f) {
+    if (f.verdict == "OK" || f.verdict == "NOK") return f.cold_mm;
+    return std::nullopt;
+}
+
+// The last `days` day files' first day (YYYY-MM-DD), as a range bound.
+std::string first_of_last_days(const std::filesystem::path& dir, std::size_t days) {
+    std::vector<std::string> names;
+    std::error_code ec;
+    for (const auto& e : std::filesystem::directory_iterator(dir, ec))
+        if (e.path().extension() == ".jsonl") names.push_back(e.path().stem().string());
+    std::sort(names.begin(), names.end());
+    return names.size() > days ? names[names.size() - days] : "";
+}
+
+}  // namespace
+
+QualityFeed::QualityFeed(const std::filesystem::path& results_dir, const QualityConfig& config)
+    : dir_(results_dir), config_(config) {
+    if (config_.drift_baseline > 0)
+        watch_.emplace(quality::DriftWatchConfig{config_.drift_baseline});
+}
+
+void QualityFeed::load(std::int64_t now_ns) {
+    today_ = results::local_date(now_ns);
+    parts_.clear();
+    const auto read = results::read_parts(dir_, {first_of_last_days(dir_, 3), ""});
+    if (!read) {  // a new cell has no results yet: nothing to go on from
+        spdlog::info("quality: {}: starting without earlier results", read.error().message);
+        return;
+    }
+    for (const auto& p : read->parts) {
+        if (p.master_check) continue;
+        if (watch_)
+            for (const auto& f : p.features) watch_->add(p.die, p.recipe, f.name, watched(f));
+        if (p.time.compare(0, today_.size(), today_) == 0) parts_.push_back(p);
+    }
+    spdlog::info(
+        "quality: drift watch from {} results in {} day files; today's report has {} parts",
+        read->parts.size(), read->files, parts_.size());
+}
+
+std::vector<std::pair<std::string, std::string>> QualityFeed::observe(
+    int die, const pipeline::PartResult& r) {
+    std::vector<std::pair<std::string, std::string>> out;
+    if (!watch_) return out;
+    for (const auto& f : r.measurement.features) {
+        const bool used = f.verdict == measure::Verdict::kOk || f.verdict == measure::Verdict::kNok;
+        const auto state = watch_->add(die, r.recipe, f.name, used ? f.cold_mm : std::nullopt);
+        out.emplace_back(f.name, quality::to_string(state));
+    }
+    return out;
+}
+
+void QualityFeed::stored(const std::string& jsonl_line, std::int64_t time_ns) {
+    if (!config_.lot_report) return;
+    const std::string day = results::local_date(time_ns);
+    if (day != today_) {
+        today_ = day;
+        parts_.clear();
+    }
+    try {
+        parts_.push_back(results::parse_result_line(jsonl_line));
+    } catch (const nlohmann::json::exception& e) {
+        spdlog::error("lot report: the results line does not read back: {}", e.what());
+        return;
+    }
+    write_report();
+}
+
+void QualityFeed::write_report() const {
+    const auto t0 = std::chrono::steady_clock::now();
+    report::LotOptions options;
+    options.title = "Lot report " + today_ + " (hotgauged, updated after every part)";
+    const std::string html =
+        report::lot_report_html(report::summarize_lot(parts_, options), options);
+    const auto path = dir_ / (today_ + ".report.html"), tmp = dir_ / (today_ + ".report.html.tmp");
+    {
+        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+        out << html;
+        if (!out.flush()) {
+            spdlog::error("lot report: {}: cannot write", tmp.string());
+            return;
+        }
+    }
+    std::error_code ec;
+    std::filesystem::rename(tmp, path, ec);
+    if (ec) spdlog::error("lot report: {}: {}", path.string(), ec.message());
+    spdlog::debug(
+        "lot report: {} parts, {} ms", parts_.size(),
+        std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - t0)
+            .count());
+}
+
+}  // namespace hotgauge::cell

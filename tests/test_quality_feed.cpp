@@ -1,0 +1,101 @@
+// The daemon's drift watch and day's lot report (cell::QualityFeed, docs/quality.md "In the
+// daemon"): the states that go with each result, the page rewritten after every part, and the
+// watch taken up again from the results files after a restart.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <random>
+#include <sstream>
+
+#include "hotgauge/cell/quality_feed.hpp"
+#include "hotgauge/core/clock.hpp"
+#include "hotgauge/results/results_log.hpp"
+#include "temp_dir.hpp"
+
+using namespace hotgauge;
+
+namespace {
+
+pipeline::PartResult part(double diameter_mm, bool degraded = false) {
+    pipeline::PartResult r;
+    r.part_id = "P";
+    r.recipe = "hub-a";
+    r.measurement.verdict = measure::Verdict::kOk;
+    measure::FeatureResult f;
+    f.name = "Diameter 3";
+    f.slot = 3;
+    f.nominal_mm = 69.5;
+    f.tol_lower_mm = -0.3;
+    f.tol_upper_mm = 0.3;
+    f.cold_mm = diameter_mm;
+    f.deviation_mm = diameter_mm - 69.5;
+    f.verdict = degraded ? measure::Verdict::kDegraded : measure::Verdict::kOk;
+    r.measurement.features.push_back(f);
+    return r;
+}
+
+std::string state_of(const std::vector<std::pair<std::string, std::string>>& drift) {
+    return drift.empty() ? "" : drift[0].second;
+}
+
+std::string read(const std::filesystem::path& p) {
+    std::ifstream in(p);
+    std::stringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+}  // namespace
+
+TEST(QualityFeed, DriftPerDieAndTheDaysReportGoOnAfterARestart) {
+    test::TempDir tmp;
+    const auto dir = tmp.path / "results";
+    auto log = results::ResultsLog::open({dir, false});
+    ASSERT_TRUE(log.ok()) << log.error().message;
+    const std::int64_t t0 = core::realtime_ns();
+    std::mt19937 rng(21);
+    std::normal_distribution<double> noise(0.0, 0.01);
+    cell::QualityFeed feed(dir, {.drift_baseline = 20, .lot_report = true});
+    feed.load(t0);  // no results yet
+    // Die 1: 100 parts steady, then wearing 5 µm per 10 parts (fast, to keep the test short).
+    std::vector<std::string> states;
+    for (int i = 0; i < 300; ++i) {
+        const auto r = part(69.5 + noise(rng) + (i >= 100 ? 5e-4 * (i - 100) : 0.0), i == 5);
+        results::ResultEntry e{t0 + i * 1'000'000, std::uint64_t(i + 1), &r, "v", "h",
+                               std::nullopt};
+        e.die_id = 1;
+        e.drift = feed.observe(e.die_id, r);
+        states.push_back(state_of(e.drift));
+        ASSERT_TRUE(log->append(e).ok());
+        feed.stored(results::jsonl_line(e), e.time_ns);
+    }
+    EXPECT_EQ(states[19], "BASELINE");  // part 6 was degraded: not in the baseline
+    EXPECT_EQ(states[20], "WATCHING");
+    EXPECT_EQ(states[99], "WATCHING");
+    const auto first_up = std::find(states.begin(), states.end(), "DRIFT_UP") - states.begin();
+    EXPECT_GT(first_up, 100);
+    EXPECT_LT(first_up, 200);  // within 50 µm of drift, the tolerance is ±300 µm
+    EXPECT_EQ(states.back(), "DRIFT_UP");
+
+    // The day's page: every part, the drift marked, nothing left half written.
+    const auto page = dir / (results::local_date(t0) + ".report.html");
+    const std::string html = read(page);
+    EXPECT_NE(html.find("300 parts"), std::string::npos);
+    EXPECT_NE(html.find("drift warning, part"), std::string::npos);
+    EXPECT_FALSE(std::filesystem::exists(page.string() + ".tmp"));
+
+    // A restart: the watch is rebuilt from the files, so die 1 is still drifting; die 2 is new.
+    cell::QualityFeed again(dir, {.drift_baseline = 20, .lot_report = true});
+    again.load(t0 + 300'000'000);
+    const auto r = part(69.5 + 0.1);
+    EXPECT_EQ(state_of(again.observe(1, r)), "DRIFT_UP");
+    EXPECT_EQ(state_of(again.observe(2, r)), "BASELINE");
+    results::ResultEntry e{t0 + 301'000'000, 301, &r, "v", "h", std::nullopt};
+    ASSERT_TRUE(log->append(e).ok());
+    again.stored(results::jsonl_line(e), e.time_ns);
+    EXPECT_NE(read(page).find("301 parts"), std::string::npos);
+
+    // No watch configured: no states.
+    cell::QualityFeed off(dir, {.drift_baseline = 0, .lot_report = false});
+    EXPECT_TRUE(off.observe(1, r).empty());
+}
