@@ -186,3 +186,46 @@ TEST(ReadParts, TimeRangeAndRetriedLines) {
     EXPECT_NE(bad.error().message.find("2026-12-04.jsonl:5: not a result line"), std::string::npos)
         << bad.error().message;
 }
+
+// Master checks in the lot: a type-1 study per master and certified feature, from the checks'
+// values measured OK or NOK, against the certificate's value and the recipe's tolerance.
+TEST(LotReport, MasterChecksGiveATypeOneStudy) {
+    auto parts = lot_parts();
+    std::mt19937 rng(8);
+    std::normal_distribution<double> noise(0.002, 0.003);  // a 2 µm bias
+    std::vector<double> values;
+    for (int k = 0; k < 12; ++k) {
+        results::PartRecord m = parts[0];
+        m.sequence = 2000 + k;
+        m.master_check = true;
+        m.master = "M-1";
+        m.certified = {{"Diameter 3", 69.51}};
+        m.features[0].cold_mm = 69.51 + noise(rng);
+        if (k == 4)
+            m.features[0].verdict = "DEGRADED";  // not used
+        else
+            values.push_back(*m.features[0].cold_mm);
+        parts.push_back(m);
+    }
+    const report::Lot lot = report::summarize_lot(parts, {});
+    EXPECT_EQ(lot.master_checks, 13u);  // and lot_parts()'s own, which has no certificate
+    ASSERT_EQ(lot.masters.size(), 1u);
+    const report::MasterStudy& m = lot.masters[0];
+    EXPECT_EQ(m.master, "M-1");
+    ASSERT_TRUE(m.study) << m.no_study;
+    const auto expected = quality::type1_study(values, 69.51, 0.6, 0.0001);
+    ASSERT_TRUE(expected);
+    EXPECT_EQ(m.study->n, 11u);
+    EXPECT_DOUBLE_EQ(m.study->cg, expected->cg);
+    EXPECT_DOUBLE_EQ(m.study->cgk, expected->cgk);
+    EXPECT_DOUBLE_EQ(m.study->bias, expected->bias);
+    const std::string html = report::lot_report_html(lot, {});
+    EXPECT_NE(html.find("Master checks: type-1 gauge study"), std::string::npos);
+    // Too few checks: no study, and why.
+    parts.resize(parts.size() - 3);
+    const report::Lot few = report::summarize_lot(parts, {});
+    ASSERT_EQ(few.masters.size(), 1u);
+    EXPECT_FALSE(few.masters[0].study);
+    EXPECT_EQ(few.masters[0].no_study,
+              "8 checks measured OK or NOK, 10 needed (VDA 5 asks for 25)");
+}

@@ -217,6 +217,30 @@ std::string feature_section(const FeatureLot& f, std::size_t i) {
     return s + "</section>";
 }
 
+std::string master_table(const Lot& lot) {
+    if (lot.masters.empty()) return "";
+    std::string s =
+        "<h2>Master checks: type-1 gauge study</h2><p>Each certified feature of each master, "
+        "over its checks in this lot (docs/quality.md): reference = the certificate's value, T = "
+        "the recipe's tolerance; Cg = 0.2·T/6s, Cgk = (0.1·T − |bias|)/3s (1.33 or more to "
+        "pass).</p><table class='masters'><tr><th class='l'>master</th><th class='l'>feature"
+        "</th><th>checks</th><th>reference</th><th>mean</th><th>bias</th><th>p (bias)</th>"
+        "<th>s</th><th>Cg</th><th>Cgk</th></tr>";
+    for (const MasterStudy& m : lot.masters) {
+        s += "<tr><td class='l'>" + escape(m.master) + "</td><td class='l'>" + escape(m.feature) +
+             "</td>" + cell(std::to_string(m.values.size())) + cell(num(m.reference_mm, 4));
+        if (!m.study) {
+            s += "<td colspan='6' class='l'>" + escape(m.no_study) + "</td></tr>";
+            continue;
+        }
+        const auto& t = *m.study;
+        s += cell(num(t.mean, 4)) + cell(num(t.bias, 4)) + cell(num(t.p_value, 3)) +
+             cell(num(t.s, 5)) + cell(num(t.cg, 2), t.cg < 1.33 ? "nok" : nullptr) +
+             cell(num(t.cgk, 2), t.cgk < 1.33 ? "nok" : nullptr) + "</tr>";
+    }
+    return s + "</table>";
+}
+
 }  // namespace
 
 std::string lot_report_html(const Lot& lot, const LotOptions& options) {
@@ -233,7 +257,7 @@ std::string lot_report_html(const Lot& lot, const LotOptions& options) {
     s += ". Master checks: " + std::to_string(lot.master_checks) +
          " (not in the statistics). Values are cold (20 °C), mm; statistics use values measured "
          "OK or NOK (degraded values are counted, not used).</p>";
-    s += summary_table(lot);
+    s += summary_table(lot) + master_table(lot);
     for (std::size_t i = 0; i < lot.features.size(); ++i) s += feature_section(lot.features[i], i);
     return s + "</body></html>\n";
 }

@@ -45,6 +45,39 @@ void add_statistics(FeatureLot& f, const LotOptions& options) {
     f.drift = drift.state();
 }
 
+MasterStudy& master_study(Lot& lot, const std::string& master, const std::string& feature) {
+    for (MasterStudy& m : lot.masters)
+        if (m.master == master && m.feature == feature) return m;
+    lot.masters.push_back({master, feature});
+    return lot.masters.back();
+}
+
+void add_master_check(Lot& lot, const results::PartRecord& p) {
+    ++lot.master_checks;
+    for (const auto& [name, certified] : p.certified)
+        for (const results::FeatureRecord& f : p.features) {
+            if (f.name != name) continue;
+            MasterStudy& m = master_study(lot, p.master, name);
+            m.reference_mm = certified;
+            m.tolerance_mm = f.upper_mm - f.lower_mm;
+            if (f.cold_mm && (f.verdict == "OK" || f.verdict == "NOK"))
+                m.values.push_back(*f.cold_mm);
+        }
+}
+
+void add_study(MasterStudy& m) {
+    if (m.values.size() < kMinMasterChecks) {
+        m.no_study = std::to_string(m.values.size()) + " checks measured OK or NOK, " +
+                     std::to_string(kMinMasterChecks) + " needed (VDA 5 asks for 25)";
+        return;
+    }
+    const auto t = quality::type1_study(m.values, m.reference_mm, m.tolerance_mm, 0.0001);
+    if (t)
+        m.study = *t;
+    else
+        m.no_study = t.error().message;
+}
+
 }  // namespace
 
 std::string reason_group(const std::string& reason) {
@@ -63,7 +96,7 @@ Lot summarize_lot(const std::vector<results::PartRecord>& parts, const LotOption
     Lot lot;
     for (const results::PartRecord& p : parts) {
         if (p.master_check) {
-            ++lot.master_checks;
+            add_master_check(lot, p);
             continue;
         }
         if (lot.parts++ == 0) {
@@ -84,6 +117,7 @@ Lot summarize_lot(const std::vector<results::PartRecord>& parts, const LotOption
         }
     }
     for (FeatureLot& f : lot.features) add_statistics(f, options);
+    for (MasterStudy& m : lot.masters) add_study(m);
     return lot;
 }
 

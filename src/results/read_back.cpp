@@ -65,6 +65,12 @@ PartRecord part_of(const json& line) {
     p.time = line.value("time", "");
     p.master_check = line.contains("verification");
     p.die = line.value("die", 0);
+    if (auto v = line.find("verification"); v != line.end()) {
+        p.master = v->value("master", "");
+        for (const json& f : v->at("features"))
+            p.certified.emplace_back(f.at("name").get<std::string>(),
+                                     f.at("certified_mm").get<double>());
+    }
     const json& part = line.at("part");
     p.part_id = part.value("part_id", "");
     p.recipe = part.value("recipe", "");

@@ -42,12 +42,25 @@ struct FeatureLot {
     std::string no_statistics;  // why there are no limits or indices, when there are none
 };
 
+// A type-1 gauge study from the master checks in the lot (docs/quality.md): one master's
+// certified feature measured again and again. Values: the check's cold values measured OK or
+// NOK; the reference is the certificate's value, T the recipe's tolerance width.
+inline constexpr std::size_t kMinMasterChecks = 10;  // fewer: no study (VDA 5 asks for 25)
+struct MasterStudy {
+    std::string master, feature;
+    double reference_mm = 0, tolerance_mm = 0;
+    std::vector<double> values;
+    std::optional<quality::Type1Study> study;
+    std::string no_study;  // why there is none
+};
+
 struct Lot {
     std::size_t parts = 0, master_checks = 0;
     std::map<std::string, std::size_t> verdicts;  // of the parts
     std::string first_time, last_time;
     std::uint64_t first_sequence = 0, last_sequence = 0;
     std::vector<FeatureLot> features;  // in recipe order of the first part, then new ones
+    std::vector<MasterStudy> masters;  // by master, then certificate order
 };
 
 // The statistics of every feature of the production parts (master checks left out).

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "hotgauge/core/result.hpp"
@@ -34,6 +35,9 @@ struct PartRecord {
     bool master_check = false;
     int die = 0;                          // the die the PLC named, 0 when none
     std::vector<FeatureRecord> features;  // in recipe order
+    // A master check's master serial and certified values (feature name -> mm).
+    std::string master;
+    std::vector<std::pair<std::string, double>> certified;
 };
 
 // Which parts to read: by the local time as written, compared on the bound's length, both ends
