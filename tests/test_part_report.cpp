@@ -190,6 +190,22 @@ TEST(PartReport, IsSelfContainedWithOnePictureEachAndNoNumberForWhatIsNotMeasure
     EXPECT_NE(html->find("Height 3 side1: flange_top"), std::string::npos);
 }
 
+// Without a pose (part not found) there is nothing to compare the scan with: the range images
+// and the table only, and the reason.
+TEST(PartReport, WithoutAPoseHasRangeImagesAndTheReason) {
+    const auto& e = env();
+    pipeline::PartResult r = e.result;
+    r.T_world_part.reset();
+    r.match = match::MatchResult{};
+    r.match->reason = "part not found: best score 0.412";
+    const auto html = report::part_report_html(e.sim.recording, e.recipe, r);
+    ASSERT_TRUE(html) << html.error().message;
+    const std::size_t faces = e.sim.recording.faces.size();
+    EXPECT_EQ(count(*html, "<img "), faces);
+    EXPECT_EQ(count(*html, "<svg "), e.recipe.features.size());
+    EXPECT_EQ(count(*html, "No deviation map: part not found: best score 0.412."), faces);
+}
+
 // A value beyond the drawn range sits at the band's edge as an arrow, not off the picture.
 TEST(PartReport, ValueFarOutOfToleranceIsClampedToTheEdge) {
     const auto& e = env();
