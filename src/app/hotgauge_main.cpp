@@ -27,6 +27,7 @@ int main(int argc, char** argv) {
     add(hotgauge::app::add_calibrate);
     add(hotgauge::app::add_verify);
     add(hotgauge::app::add_study);
+    add(hotgauge::app::add_report);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
