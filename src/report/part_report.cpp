@@ -351,7 +351,8 @@ table.summary th { font-weight: normal; color: #555; }
 .v-OK { background: #2e7d32; } .v-NOK { background: #c62828; }
 .v-NOT_MEASURED { background: #616161; } .v-DEGRADED { background: #ef6c00; }
 .pictures { display: flex; flex-wrap: wrap; gap: 16px; align-items: flex-start; }
-figure { margin: 0; flex: 1 1 360px; }
+figure { margin: 0; flex: 1 1 360px; max-width: calc(50% - 140px); }
+td.name, td.cold, td.dev, td.u { white-space: nowrap; }
 figure img { display: block; width: 100%; image-rendering: pixelated; }
 .map { position: relative; }
 .map svg { position: absolute; left: 0; top: 0; width: 100%; height: 100%; }
