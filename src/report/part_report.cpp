@@ -141,7 +141,7 @@ std::string feature_table(const measure::PartMeasurement& m) {
 
 // The vertical colour scale of a deviation map, with its values in mm and the other colours of
 // the picture. `id` keeps each legend's gradient its own.
-std::string legend_svg(double scale_mm, const std::string& id) {
+std::string legend_svg(double scale_mm, double off_part_mm, const std::string& id) {
     const auto& stops = deviation_stops();
     std::string s =
         "<svg class=\"legend\" width=\"250\" height=\"330\" viewBox=\"0 0 250 330\" "
@@ -164,7 +164,7 @@ std::string legend_svg(double scale_mm, const std::string& id) {
              text + "</text>";
     }
     const std::pair<Colour, std::string> keys[] = {
-        {kOffPartColour, "not the part (support, far off)"},
+        {kOffPartColour, "not the part (support, > " + fixed(off_part_mm, 1) + " mm off)"},
         {kNoPointColour, "no point"},
         {kLevelColour, "measured level (height end)"},
         {kEdgeColour, "measured edge circle (diameter)"}};
@@ -225,7 +225,7 @@ std::string range_figure(const core::FaceScan& face) {
            " mm dark grey, black: no return.</figcaption></figure>";
 }
 
-// "on the part: 81 234 points, median +0.004 mm, 5 % … 95 %: −0.071 … +0.083 mm"
+// "on the part: 81234 points, median +0.004 mm, 5 % … 95 %: −0.071 … +0.083 mm"
 std::string deviation_statistics(const DeviationMap& m) {
     std::vector<float> d;
     for (std::size_t px = 0; px < m.kind.size(); ++px)
@@ -255,7 +255,7 @@ std::string deviation_figure(const DeviationMap& m, const std::vector<Overlay>& 
         labels_svg(m, overlays, pixels) +
         "</div><figcaption>Deviation from the nominal hot surface (" +
         escape(deviation_statistics(m)) + ").</figcaption></figure>" +
-        legend_svg(scale_mm, "deviation-scale-" + std::to_string(face_index));
+        legend_svg(scale_mm, config.off_part_mm, "deviation-scale-" + std::to_string(face_index));
     s += "</div><ul class=\"overlays\">";
     for (std::size_t j = 0; j < overlays.size(); ++j) {
         const Overlay& o = overlays[j];
