@@ -27,7 +27,8 @@ struct MeasureArgs {
 
 }  // namespace
 
-std::optional<pipeline::PartResult> measure_job(const MeasureJob& a, core::Recording* rec_out) {
+std::optional<pipeline::PartResult> measure_job(const MeasureJob& a, core::Recording* rec_out,
+                                                core::Recipe* recipe_out) {
     auto rec = io::read_recording(a.recording);
     if (!rec) {
         spdlog::error("{}", rec.error().message);
@@ -100,6 +101,7 @@ std::optional<pipeline::PartResult> measure_job(const MeasureJob& a, core::Recor
     pipeline::PartResult result = pipeline::run(*rec, *recipe, opt);
     for (const auto& w : result.warnings) spdlog::warn("{}", w);
     if (rec_out) *rec_out = std::move(*rec);
+    if (recipe_out) *recipe_out = std::move(*recipe);
     return result;
 }
 

@@ -1,8 +1,11 @@
-// hotgauge report lot RESULTS: the lot report of docs/results.md over a results folder.
+// hotgauge report lot|part: the quality engineer's reports, self-contained HTML files
+// (docs/results.md). `report part` is in cmd_report_part.cpp.
 #include <cstdio>
 #include <fstream>
 #include <memory>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "commands.hpp"
 #include "hotgauge/report/lot_report.hpp"
@@ -41,12 +44,8 @@ int run_lot(const LotArgs& a) {
     return 0;
 }
 
-}  // namespace
-
-Command add_report(CLI::App& app) {
+Command add_report_lot(CLI::App* r) {
     auto a = std::make_shared<LotArgs>();
-    auto* r = app.add_subcommand("report", "reports for quality engineers (docs/results.md)");
-    r->require_subcommand(1);
     auto* lot = r->add_subcommand("lot", "lot report: SPC charts, capability, verdict counts");
     lot->add_option("results", a->results, "results folder (YYYY-MM-DD.jsonl files)")->required();
     lot->add_option("--out", a->out, "the HTML file to write")->required();
@@ -56,7 +55,24 @@ Command add_report(CLI::App& app) {
                     "values per feature the control limits come from (at least 20)")
         ->capture_default_str()
         ->check(CLI::Range(std::size_t{report::kMinBaseline}, std::size_t{1000000}));
-    return [a, lot] { return lot->parsed() ? run_lot(*a) : 2; };
+    return [a] { return run_lot(*a); };
+}
+
+}  // namespace
+
+Command add_report(CLI::App& app) {
+    auto* report = app.add_subcommand("report", "reports for the quality engineer (HTML)");
+    report->require_subcommand(1);
+    auto commands = std::make_shared<std::vector<std::pair<CLI::App*, Command>>>();
+    for (auto add : {add_report_lot, add_report_part}) {
+        Command run = add(report);
+        commands->emplace_back(report->get_subcommands({}).back(), std::move(run));
+    }
+    return [commands] {
+        for (const auto& [sub, run] : *commands)
+            if (sub->parsed()) return run();
+        return 2;
+    };
 }
 
 }  // namespace hotgauge::app

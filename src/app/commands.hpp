@@ -23,7 +23,9 @@ Command add_plc(CLI::App& app);
 Command add_calibrate(CLI::App& app);
 Command add_verify(CLI::App& app);
 Command add_study(CLI::App& app);
+// `hotgauge report` and its subcommands (docs/results.md): `report part` is add_report_part.
 Command add_report(CLI::App& app);
+Command add_report_part(CLI::App* report);
 Command add_export(CLI::App& app);
 
 // The measure job, shared by `measure` and `verify`: read the recording, take the calibration's
@@ -41,8 +43,10 @@ struct MeasureJob {
     std::optional<double> default_temperature_c;  // when the recording has none (a cold master)
 };
 void add_measure_job_options(CLI::App* command, MeasureJob& job);
-// Logs what went wrong and returns nullopt; `recording` (optional) gets the recording measured.
+// Logs what went wrong and returns nullopt; `recording` and `recipe` (optional) get the
+// recording measured and the recipe it was measured with.
 std::optional<pipeline::PartResult> measure_job(const MeasureJob& job,
-                                                core::Recording* recording = nullptr);
+                                                core::Recording* recording = nullptr,
+                                                core::Recipe* recipe = nullptr);
 
 }  // namespace hotgauge::app

@@ -211,8 +211,8 @@ PartRun::PartRun(const core::Recording& rec, const core::Recipe& recipe, const P
     const std::size_t n = rec.faces.size();
     if (o.compensate)
         for (std::size_t i = 0; i + 1 < n; ++i) m.compensate(rec.faces[i]);
-    const auto T_world_part = m.find_pose();
-    if (T_world_part) m.measurer.emplace(recipe, rec, *T_world_part, o.measure);
+    m.r.T_world_part = m.find_pose();
+    if (m.r.T_world_part) m.measurer.emplace(recipe, rec, *m.r.T_world_part, o.measure);
 }
 
 void PartRun::measure_all_but_last() {
@@ -228,6 +228,7 @@ PartResult PartRun::finish() {
     const std::size_t n = m.rec.faces.size();
     if (m.o.compensate && n > 0) m.compensate(m.rec.faces.back());
     for (const auto& f : m.rec.faces) m.r.faces.push_back(summarize(f));
+    m.r.u_world_mm = m.u;
     if (m.o.compensate) m.r.stage_ms.emplace(m.r.stage_ms.begin(), "compensate", m.compensate_ms);
     if (!m.measurer) return std::move(m.r);
     if (n > m.faces_added) m.add_faces(m.faces_added, n);

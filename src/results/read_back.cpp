@@ -159,4 +159,45 @@ core::Result<FeatureSeries> read_feature_values(const std::filesystem::path& dir
     return out;
 }
 
+core::Result<std::filesystem::path> archived_recording(const std::filesystem::path& dir,
+                                                       std::uint64_t sequence) {
+    const auto files = day_files(dir);
+    if (!files) return files.error();
+    std::optional<json> archived_as;  // of the last line with the sequence
+    std::string where;                // that line's file:line
+    for (const auto& path : *files) {
+        std::ifstream in(path);
+        if (!in) return core::make_error(path.string() + ": cannot open");
+        std::string text;
+        for (std::size_t n = 1; std::getline(in, text); ++n) {
+            if (text.empty()) continue;
+            try {
+                const json line = json::parse(text);
+                if (line.at("sequence").get<std::uint64_t>() != sequence) continue;
+                archived_as = line.value("archived_as", json());
+            } catch (const json::exception& e) {
+                return core::make_error(path.string() + ":" + std::to_string(n) +
+                                        ": not a result line: " + e.what());
+            }
+            where = path.string() + ":" + std::to_string(n);
+        }
+    }
+    const std::string part = "part sequence " + std::to_string(sequence);
+    if (!archived_as)
+        return core::make_error(dir.string() + ": no " + part + " in the results (" +
+                                std::to_string(files->size()) + " day files)");
+    if (!archived_as->is_string())
+        return core::make_error(where + ": " + part +
+                                " was not archived (the archive keeps NOK, degraded and "
+                                "unmeasured parts and every Nth OK part)");
+    std::filesystem::path folder = archived_as->get<std::string>();
+    std::error_code ec;
+    if (folder.is_relative() && !std::filesystem::exists(folder, ec)) folder = dir / folder;
+    if (!std::filesystem::is_directory(folder, ec))
+        return core::make_error(where + ": " + part + " was archived as " +
+                                archived_as->get<std::string>() +
+                                ", which is gone (deleted to keep the archive's quota?)");
+    return folder;
+}
+
 }  // namespace hotgauge::results

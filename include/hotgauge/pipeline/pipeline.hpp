@@ -28,7 +28,7 @@ struct PipelineOptions {
     measure::MeasureConfig measure;
 };
 
-// What compensation did on one face (the per-profile u is not kept in the result).
+// What compensation did on one face (its per-profile u is PartResult::u_world_mm).
 struct FaceCompensationSummary {
     std::string face;
     bool applied = false, degraded = false;
@@ -62,6 +62,11 @@ struct PartResult {
     bool degraded = false;
     std::vector<std::string> degraded_reasons;
     measure::PartMeasurement measurement;
+    // What the measurement saw the scans with, for pictures of the part (report::part_report_html):
+    // the pose (none: nothing measured) and each face's displacement per profile (a face absent:
+    // not compensated).
+    std::optional<Eigen::Isometry3d> T_world_part;
+    measure::FaceDisplacements u_world_mm;
     std::vector<std::string> warnings;                     // reader findings, degraded conditions
     std::vector<std::pair<std::string, double>> stage_ms;  // wall time per stage
 };

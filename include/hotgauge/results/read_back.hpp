@@ -82,4 +82,11 @@ struct FeatureSeries {
 core::Result<FeatureSeries> read_feature_values(const std::filesystem::path& dir,
                                                 const std::string& feature);
 
+// The recording the daemon archived for part `sequence` (the `archived_as` of its results line,
+// the last one if repeated), for `hotgauge report part --results`. A relative `archived_as` is
+// taken as written, else relative to `dir`. Errors name the folder when no line has that
+// sequence, and the file and line when the part was not archived or its recording is gone.
+core::Result<std::filesystem::path> archived_recording(const std::filesystem::path& dir,
+                                                       std::uint64_t sequence);
+
 }  // namespace hotgauge::results
