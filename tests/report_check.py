@@ -10,7 +10,10 @@ virtual line test on its own results (`virtual_line.py --check-reports`) or alon
   measured must have no value (an empty K0001, attribute 255), never 0.
 - Lot report: `hotgauge report lot` opened in a real headless Chromium: the number of charts
   (two per feature with a value), no image that failed to load, and every chart's pixels in a
-  screenshot not blank.
+  screenshot not blank (its data line or bars drawn).
+- Part report: `hotgauge report part --results --sequence` of an archived part, in Chromium: two
+  pictures per face and a tolerance band per feature, all loaded and not blank.
+- The daemon's own: the drift state with every result, and its day's lot report in Chromium.
 """
 import json
 import os
@@ -140,6 +143,7 @@ def check_page(html, ink=None, width=1280):
     Every svg and img must have a size and more than 3 colours; an svg whose class is in `ink`
     must have at least 20 pixels of that colour (its data drawn, not only frame and labels)."""
     ink = ink or {}
+    html = os.path.abspath(html)
     probe = html + ".probe.html"
     with open(html) as f, open(probe, "w") as out:
         out.write(f.read().replace("</body>", PROBE + "</body>"))
@@ -179,6 +183,26 @@ def check_lot_report(bin_dir, results_dir, work):
     print(f"lot report: {len(classes)} charts rendered in Chromium, none blank ({html}, {png})")
 
 
+def check_part_report(bin_dir, results_dir, work):
+    """`hotgauge report part` of the first production part the daemon archived, in Chromium:
+    a range image and a deviation map per face, all loaded and not blank, a tolerance band per
+    feature."""
+    lines = [l for l in result_lines(results_dir) if "verification" not in l and l["archived_as"]]
+    assert lines, f"{results_dir}: no archived production part"
+    line = lines[0]
+    out = os.path.join(work, "part-report")
+    subprocess.run([os.path.join(bin_dir, "src/app/hotgauge"), "report", "part", "--results",
+                    results_dir, "--sequence", str(line["sequence"]), "--out", out], check=True)
+    html = os.path.join(out, f"part-{line['part']['part_id']}.html")
+    seen, png = check_page(html)
+    faces, features = len(line["part"]["faces"]), len(line["part"]["features"])
+    classes = [c for c, _ in seen["svg"]]
+    assert len(seen["img"]) == 2 * faces, (len(seen["img"]), faces)
+    assert classes.count("band") == features, classes
+    print(f"part report of sequence {line['sequence']}: {len(seen['img'])} pictures of {faces} "
+          f"faces and {features} tolerance bands rendered in Chromium, none blank ({html}, {png})")
+
+
 def check_daemon_report(results_dir):
     """The daemon's own files: the drift state with every production result (the line has too
     few parts for a baseline: BASELINE for every feature), and the day's lot report, which it
@@ -203,6 +227,7 @@ def main():
     os.makedirs(work, exist_ok=True)
     check_aqdef(bin_dir, results_dir, work)
     check_lot_report(bin_dir, results_dir, work)
+    check_part_report(bin_dir, results_dir, work)
     return 0
 
 

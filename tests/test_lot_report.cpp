@@ -229,3 +229,22 @@ TEST(LotReport, MasterChecksGiveATypeOneStudy) {
     EXPECT_EQ(few.masters[0].no_study,
               "8 checks measured OK or NOK, 10 needed (VDA 5 asks for 25)");
 }
+
+// A master certified anew (or two certificates of one master, as the virtual line's wrong one):
+// each certified value is its own reference, never mixed.
+TEST(LotReport, EachCertifiedValueIsItsOwnStudy) {
+    auto parts = lot_parts();
+    for (int k = 0; k < 4; ++k) {
+        results::PartRecord m = parts[0];
+        m.master_check = true;
+        m.master = "M-1";
+        m.sequence = 3000 + k;
+        m.certified = {{"Diameter 3", k % 2 ? 69.51 : 69.56}};
+        parts.push_back(m);
+    }
+    const report::Lot lot = report::summarize_lot(parts, {});
+    ASSERT_EQ(lot.masters.size(), 2u);
+    EXPECT_EQ(lot.masters[0].reference_mm, 69.56);
+    EXPECT_EQ(lot.masters[1].reference_mm, 69.51);
+    EXPECT_EQ(lot.masters[0].values.size(), 2u);
+}

@@ -715,6 +715,7 @@ def main():
             import report_check
             report_check.check_aqdef(a.bin_dir, line.results_dir, workdir)
             report_check.check_lot_report(a.bin_dir, line.results_dir, workdir)
+            report_check.check_part_report(a.bin_dir, line.results_dir, workdir)
             report_check.check_daemon_report(line.results_dir)
         check_notifications(line.notify)
         assert all(p["state"] == DONE for p in parts), "a part was not measured"

@@ -45,10 +45,12 @@ void add_statistics(FeatureLot& f, const LotOptions& options) {
     f.drift = drift.state();
 }
 
-MasterStudy& master_study(Lot& lot, const std::string& master, const std::string& feature) {
+// One study per master, feature and certified value (a recertified master is a new reference).
+MasterStudy& master_study(Lot& lot, const std::string& master, const std::string& feature,
+                          double certified) {
     for (MasterStudy& m : lot.masters)
-        if (m.master == master && m.feature == feature) return m;
-    lot.masters.push_back({master, feature});
+        if (m.master == master && m.feature == feature && m.reference_mm == certified) return m;
+    lot.masters.push_back({master, feature, certified});
     return lot.masters.back();
 }
 
@@ -57,8 +59,7 @@ void add_master_check(Lot& lot, const results::PartRecord& p) {
     for (const auto& [name, certified] : p.certified)
         for (const results::FeatureRecord& f : p.features) {
             if (f.name != name) continue;
-            MasterStudy& m = master_study(lot, p.master, name);
-            m.reference_mm = certified;
+            MasterStudy& m = master_study(lot, p.master, name, certified);
             m.tolerance_mm = f.upper_mm - f.lower_mm;
             if (f.cold_mm && (f.verdict == "OK" || f.verdict == "NOK"))
                 m.values.push_back(*f.cold_mm);
@@ -67,7 +68,8 @@ void add_master_check(Lot& lot, const results::PartRecord& p) {
 
 void add_study(MasterStudy& m) {
     if (m.values.size() < kMinMasterChecks) {
-        m.no_study = std::to_string(m.values.size()) + " checks measured OK or NOK, " +
+        m.no_study = std::to_string(m.values.size()) +
+                     (m.values.size() == 1 ? " check" : " checks") + " measured OK or NOK, " +
                      std::to_string(kMinMasterChecks) + " needed (VDA 5 asks for 25)";
         return;
     }

@@ -60,7 +60,7 @@ struct Lot {
     std::string first_time, last_time;
     std::uint64_t first_sequence = 0, last_sequence = 0;
     std::vector<FeatureLot> features;  // in recipe order of the first part, then new ones
-    std::vector<MasterStudy> masters;  // by master, then certificate order
+    std::vector<MasterStudy> masters;  // by master, then certificate order; per certified value
 };
 
 // The statistics of every feature of the production parts (master checks left out).
