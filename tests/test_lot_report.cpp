@@ -248,3 +248,43 @@ TEST(LotReport, EachCertifiedValueIsItsOwnStudy) {
     EXPECT_EQ(lot.masters[1].reference_mm, 69.51);
     EXPECT_EQ(lot.masters[0].values.size(), 2u);
 }
+
+// Repeat scans: production parts measured again give a type-3 study, with the most common number
+// of repeats; the parts measured once are not in it.
+TEST(LotReport, RepeatScansGiveATypeThreeStudy) {
+    auto parts = lot_parts();  // 60 parts, each once
+    std::mt19937 rng(9);
+    std::normal_distribution<double> part_to_part(0.0, 0.02), repeat(0.0, 0.003);
+    std::vector<std::vector<double>> expected;
+    for (int id = 0; id < 6; ++id) {
+        const double true_mm = 69.5 + part_to_part(rng);
+        const int scans = id == 5 ? 2 : 3;  // one part scanned only twice: left out of r = 3
+        std::vector<double> v;
+        for (int k = 0; k < scans; ++k) {
+            results::PartRecord p = parts[0];
+            p.part_id = "R-" + std::to_string(id);
+            p.sequence = 4000 + 10 * id + k;
+            p.features[0].cold_mm = true_mm + repeat(rng);
+            p.features[0].verdict = "OK";
+            v.push_back(*p.features[0].cold_mm);
+            parts.push_back(p);
+        }
+        if (scans == 3) expected.push_back(v);
+    }
+    const report::Lot lot = report::summarize_lot(parts, {});
+    ASSERT_EQ(lot.repeats.size(), 2u);  // one per feature
+    const report::RepeatStudy& r = lot.repeats[0];
+    EXPECT_EQ(r.feature, "Diameter 3");
+    EXPECT_EQ(r.repeats, 3u);
+    ASSERT_EQ(r.parts, 5u);
+    ASSERT_TRUE(r.study) << r.no_study;
+    const auto want = quality::type3_study(expected, 0.6);
+    ASSERT_TRUE(want);
+    EXPECT_DOUBLE_EQ(r.study->grr, want->grr);
+    EXPECT_DOUBLE_EQ(r.study->grr_percent_tolerance, want->grr_percent_tolerance);
+    EXPECT_EQ(r.study->ndc, want->ndc);
+    EXPECT_NE(report::lot_report_html(lot, {}).find("Repeat scans: type-3 gauge study"),
+              std::string::npos);
+    // Without repeats: no section.
+    EXPECT_TRUE(report::summarize_lot(lot_parts(), {}).repeats.empty());
+}

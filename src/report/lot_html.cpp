@@ -241,6 +241,30 @@ std::string master_table(const Lot& lot) {
     return s + "</table>";
 }
 
+std::string repeat_table(const Lot& lot) {
+    if (lot.repeats.empty()) return "";
+    std::string s =
+        "<h2>Repeat scans: type-3 gauge study</h2><p>Parts measured more than once in this lot "
+        "(docs/quality.md): one-way ANOVA with the part as factor; GRR = repeatability (an "
+        "automatic gauge has no operator), PV = part variation; %GRR of the tolerance ≤ 10 % "
+        "good, ≤ 30 % conditional; ndc ≥ 5.</p><table class='repeats'><tr><th class='l'>feature"
+        "</th><th>parts</th><th>repeats</th><th>GRR</th><th>PV</th><th>%GRR of TV</th>"
+        "<th>%GRR of T</th><th>ndc</th></tr>";
+    for (const RepeatStudy& r : lot.repeats) {
+        s += "<tr><td class='l'>" + escape(r.feature) + "</td>" + cell(std::to_string(r.parts)) +
+             cell(std::to_string(r.repeats));
+        if (!r.study) {
+            s += "<td colspan='5' class='l'>" + escape(r.no_study) + "</td></tr>";
+            continue;
+        }
+        const auto& t = *r.study;
+        s += cell(num(t.grr, 5)) + cell(num(t.pv, 5)) + cell(num(t.grr_percent_tv, 1)) +
+             cell(num(t.grr_percent_tolerance, 1), t.grr_percent_tolerance > 30 ? "nok" : nullptr) +
+             cell(std::to_string(t.ndc), t.ndc < 5 ? "nok" : nullptr) + "</tr>";
+    }
+    return s + "</table>";
+}
+
 }  // namespace
 
 std::string lot_report_html(const Lot& lot, const LotOptions& options) {
@@ -257,7 +281,7 @@ std::string lot_report_html(const Lot& lot, const LotOptions& options) {
     s += ". Master checks: " + std::to_string(lot.master_checks) +
          " (not in the statistics). Values are cold (20 °C), mm; statistics use values measured "
          "OK or NOK (degraded values are counted, not used).</p>";
-    s += summary_table(lot) + master_table(lot);
+    s += summary_table(lot) + master_table(lot) + repeat_table(lot);
     for (std::size_t i = 0; i < lot.features.size(); ++i) s += feature_section(lot.features[i], i);
     return s + "</body></html>\n";
 }

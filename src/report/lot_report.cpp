@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <set>
 
 #include "svg.hpp"
@@ -80,6 +81,53 @@ void add_study(MasterStudy& m) {
         m.no_study = t.error().message;
 }
 
+// The type-3 study of one feature over the parts measured more than once.
+RepeatStudy repeat_study(const FeatureLot& f,
+                         const std::map<std::string, std::vector<double>>& by_id) {
+    RepeatStudy out{f.name, f.upper_mm - f.lower_mm};
+    std::map<std::size_t, std::size_t> counts;  // values per part -> parts with that many
+    for (const auto& [id, v] : by_id)
+        if (v.size() >= 2) ++counts[v.size()];
+    std::size_t most = 0;
+    for (const auto& [n, parts] : counts)
+        if (parts > most) most = parts, out.repeats = n;
+    std::vector<std::vector<double>> design;
+    for (const auto& [id, v] : by_id)
+        if (out.repeats >= 2 && v.size() >= out.repeats)
+            design.emplace_back(v.begin(), v.begin() + std::ptrdiff_t(out.repeats));
+    out.parts = design.size();
+    if (out.parts < kMinRepeatParts) {
+        out.no_study = std::to_string(out.parts) + " parts measured " +
+                       std::to_string(out.repeats) + " times or more, " +
+                       std::to_string(kMinRepeatParts) + " needed";
+        return out;
+    }
+    const auto s = quality::type3_study(design, out.tolerance_mm);
+    if (s)
+        out.study = *s;
+    else
+        out.no_study = s.error().message;
+    return out;
+}
+
+void add_repeat_studies(Lot& lot, const std::vector<results::PartRecord>& parts) {
+    std::map<std::string, std::size_t> scans;  // part id -> production results
+    for (const auto& p : parts)
+        if (!p.master_check) ++scans[p.part_id];
+    if (std::none_of(scans.begin(), scans.end(), [](const auto& s) { return s.second > 1; }))
+        return;
+    for (const FeatureLot& f : lot.features) {
+        std::map<std::string, std::vector<double>> by_id;
+        for (const auto& p : parts) {
+            if (p.master_check || scans[p.part_id] < 2) continue;
+            for (const auto& r : p.features)
+                if (r.name == f.name && r.cold_mm && (r.verdict == "OK" || r.verdict == "NOK"))
+                    by_id[p.part_id].push_back(*r.cold_mm);
+        }
+        lot.repeats.push_back(repeat_study(f, by_id));
+    }
+}
+
 }  // namespace
 
 std::string reason_group(const std::string& reason) {
@@ -120,6 +168,7 @@ Lot summarize_lot(const std::vector<results::PartRecord>& parts, const LotOption
     }
     for (FeatureLot& f : lot.features) add_statistics(f, options);
     for (MasterStudy& m : lot.masters) add_study(m);
+    add_repeat_studies(lot, parts);
     return lot;
 }
 

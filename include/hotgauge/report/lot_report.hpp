@@ -54,6 +54,18 @@ struct MasterStudy {
     std::string no_study;  // why there is none
 };
 
+// A type-3 gauge study from repeat scans in the lot (docs/quality.md): production parts whose
+// part id was measured more than once. r is the most common number of values measured OK or NOK
+// per repeated part, and every part with at least r gives its first r; at least 5 such parts.
+inline constexpr std::size_t kMinRepeatParts = 5;
+struct RepeatStudy {
+    std::string feature;
+    double tolerance_mm = 0;
+    std::size_t parts = 0, repeats = 0;
+    std::optional<quality::Type3Study> study;
+    std::string no_study;
+};
+
 struct Lot {
     std::size_t parts = 0, master_checks = 0;
     std::map<std::string, std::size_t> verdicts;  // of the parts
@@ -61,6 +73,7 @@ struct Lot {
     std::uint64_t first_sequence = 0, last_sequence = 0;
     std::vector<FeatureLot> features;  // in recipe order of the first part, then new ones
     std::vector<MasterStudy> masters;  // by master, then certificate order; per certified value
+    std::vector<RepeatStudy> repeats;  // per feature, when some part was measured again
 };
 
 // The statistics of every feature of the production parts (master checks left out).
