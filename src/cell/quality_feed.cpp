@@ -45,8 +45,7 @@ void QualityFeed::load(std::int64_t now_ns) {
         return;
     }
     for (const auto& p : read->parts) {
-        if (p.master_check) continue;
-        if (watch_)
+        if (watch_ && !p.master_check)  // masters are no production
             for (const auto& f : p.features) watch_->add(p.die, p.recipe, f.name, watched(f));
         if (p.time.compare(0, today_.size(), today_) == 0) parts_.push_back(p);
     }
