@@ -101,17 +101,20 @@ def check_aqdef(bin_dir, results_dir, work):
         assert c["K2142"] == "mm"
     expected = [(l, f) for l in parts for f in l["part"]["features"]]
     assert len(values) == len(expected), (len(values), len(expected))
-    read = {(v["K0014"], v["char"]): v for v in values}
+    read = {(v["K0009"].split(";")[0], v["char"]): v for v in values}
     for line, f in expected:
-        v = read[(str(line["sequence"]), index[f["name"]])]
-        assert v["K0006"] == line["part"]["part_id"] and v["K0004"] == aqdef_time(line["time"])
+        v = read[(f"seq {line['sequence']}", index[f["name"]])]
+        assert v["K0006"] == v["K0014"] == line["part"]["part_id"], v
+        assert v["K0004"] == aqdef_time(line["time"]), v
+        if f["reason"]:
+            assert v["K0009"].startswith(f"seq {line['sequence']}; {f['verdict']}: "), v
         if f["cold_mm"] is None:
             assert v["K0001"] == "" and v["K0002"] == "255", (f["name"], v)
         else:
             assert abs(float(v["K0001"]) - f["cold_mm"]) <= 5e-7, (f["name"], v, f["cold_mm"])
             used = f["verdict"] in ("OK", "NOK")
             assert v["K0002"] == ("0" if used else "255"), (f["name"], v)
-    gone = read[(str(missing["sequence"]), index[names[0]])]
+    gone = read[(f"seq {missing['sequence']}", index[names[0]])]
     assert gone["K0001"] == "" and "0" not in gone["K0001"], gone
     print(f"AQDEF: {len(values)} values of {len(parts)} parts read back as written, "
           f"'{names[0]}' of part {missing['sequence']} missing, not 0 ({dfq})")

@@ -143,7 +143,7 @@ TEST(Aqdef, NotMeasuredIsAnEmptyValueNeverAZero) {
     EXPECT_EQ(dfq.rfind("K0100 2\r\n", 0), 0u);
     EXPECT_NE(dfq.find("K2110/1 69.2000\r\nK2111/1 69.8000\r\nK2142/1 mm\r\n"), std::string::npos);
     // Part 50's Diameter 3: empty value, attribute 255, its reason.
-    const auto at = dfq.find("K0014/1 50\r\n");
+    const auto at = dfq.find("K0009/1 seq 50; NOT_MEASURED: not measured: edge not found\r\n");
     ASSERT_NE(at, std::string::npos);
     const auto block = dfq.rfind("K0001/1", at);
     EXPECT_EQ(dfq.substr(block, 24), "K0001/1 \r\nK0002/1 255\r\nK");

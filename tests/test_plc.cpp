@@ -82,6 +82,7 @@ std::uint16_t u16(Verdict v) { return static_cast<std::uint16_t>(v); }
 std::uint16_t u16(State s) { return static_cast<std::uint16_t>(s); }
 std::uint16_t u16(ErrorCode e) { return static_cast<std::uint16_t>(e); }
 std::uint16_t u16(Command c) { return static_cast<std::uint16_t>(c); }
+std::uint16_t u16(DriftState d) { return static_cast<std::uint16_t>(d); }
 
 // ---- register encoding: the worked examples of docs/plc-modbus.md ---------------------------
 
@@ -1237,3 +1238,30 @@ TEST(Pyrometer, WrongSlaveIdNeverReads) {
 }
 
 }  // namespace
+
+// Map version 3: the die id comes with the trigger (holding 6); each feature's drift state is
+// the sixth register of its block and input 15 counts the features in drift; an ack clears them.
+TEST(Handshake, DieIdAndDriftRegisters) {
+    Handshake h;
+    auto w = trigger_write(5, 1, 0);
+    w.push_back(9);  // die id
+    const auto e = h.write(0, w);
+    ASSERT_TRUE(e);
+    EXPECT_EQ(e->trigger.die_id, 9);
+    PartResult r = derived_result(5, 4);
+    r.features[0].drift = DriftState::kWatching;
+    r.features[1].drift = DriftState::kUp;
+    r.features[3].drift = DriftState::kDown;
+    ASSERT_TRUE(h.finish(e->trigger.trigger_id, r));
+    const auto& in = h.inputs();
+    EXPECT_EQ(in[ir::kMapVersionReg], 3);
+    EXPECT_EQ(in[ir::kDriftCount], 2);
+    EXPECT_EQ(in[ir::feature(1) + ir::kDrift], u16(DriftState::kWatching));
+    EXPECT_EQ(in[ir::feature(2) + ir::kDrift], u16(DriftState::kUp));
+    EXPECT_EQ(in[ir::feature(3) + ir::kDrift], u16(DriftState::kNone));
+    EXPECT_EQ(in[ir::feature(4) + ir::kDrift], u16(DriftState::kDown));
+    EXPECT_EQ(ir::feature(1) + ir::kDrift, 21);  // as docs/plc-modbus.md says
+    command(h, u16(Command::kAck));
+    EXPECT_EQ(h.inputs()[ir::kDriftCount], 0);
+    EXPECT_EQ(h.inputs()[ir::feature(2) + ir::kDrift], 0);
+}

@@ -52,10 +52,11 @@ TEST(QualityFeed, DriftPerDieAndTheDaysReportGoOnAfterARestart) {
     const auto dir = tmp.path / "results";
     auto log = results::ResultsLog::open({dir, false});
     ASSERT_TRUE(log.ok()) << log.error().message;
-    const std::int64_t t0 = core::realtime_ns();
+    const std::int64_t t0 = 1'795'000'000'000'000'000;  // 2026-11-18, away from midnight
     std::mt19937 rng(21);
     std::normal_distribution<double> noise(0.0, 0.01);
-    cell::QualityFeed feed(dir, {.drift_baseline = 20, .lot_report = true});
+    cell::QualityFeed feed(dir,
+                           {.drift_baseline = 20, .lot_report = true, .lot_report_every_s = 0});
     feed.load(t0);  // no results yet
     // Die 1: 100 parts steady, then wearing 5 µm per 10 parts (fast, to keep the test short).
     std::vector<std::string> states;
@@ -84,8 +85,11 @@ TEST(QualityFeed, DriftPerDieAndTheDaysReportGoOnAfterARestart) {
     EXPECT_NE(html.find("drift warning, part"), std::string::npos);
     EXPECT_FALSE(std::filesystem::exists(page.string() + ".tmp"));
 
-    // A restart: the watch is rebuilt from the files, so die 1 is still drifting; die 2 is new.
-    cell::QualityFeed again(dir, {.drift_baseline = 20, .lot_report = true});
+    // A restart: the watch is rebuilt from the files, so die 1 is still drifting; die 2 is new. A
+    // torn line in an older day's file is skipped, not the end of the watch.
+    std::ofstream(dir / "2026-11-17.jsonl") << "{\"sequence\": 1, \"time\": \"2026-11-17T23:5";
+    cell::QualityFeed again(dir,
+                            {.drift_baseline = 20, .lot_report = true, .lot_report_every_s = 0});
     again.load(t0 + 300'000'000);
     const auto r = part(69.5 + 0.1);
     EXPECT_EQ(state_of(again.observe(1, r)), "DRIFT_UP");
@@ -95,7 +99,23 @@ TEST(QualityFeed, DriftPerDieAndTheDaysReportGoOnAfterARestart) {
     again.stored(results::jsonl_line(e), e.time_ns);
     EXPECT_NE(read(page).find("301 parts"), std::string::npos);
 
+    // Written at most every lot_report_every_s: the parts in between come with the last write,
+    // at the latest when the feed ends (the daemon stops).
+    {
+        cell::QualityFeed slow(
+            dir, {.drift_baseline = 20, .lot_report = true, .lot_report_every_s = 3600});
+        slow.load(t0 + 302'000'000);
+        for (std::uint64_t seq : {302u, 303u}) {
+            results::ResultEntry s{
+                t0 + std::int64_t(seq) * 1'000'000, seq, &r, "v", "h", std::nullopt};
+            ASSERT_TRUE(log->append(s).ok());
+            slow.stored(results::jsonl_line(s), s.time_ns);
+        }
+        EXPECT_NE(read(page).find("302 parts"), std::string::npos);  // the first write
+    }
+    EXPECT_NE(read(page).find("303 parts"), std::string::npos);  // the one at the end
+
     // No watch configured: no states.
-    cell::QualityFeed off(dir, {.drift_baseline = 0, .lot_report = false});
+    cell::QualityFeed off(dir, {.drift_baseline = 0, .lot_report = false, .lot_report_every_s = 0});
     EXPECT_TRUE(off.observe(1, r).empty());
 }

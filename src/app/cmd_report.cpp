@@ -54,7 +54,7 @@ Command add_report_lot(CLI::App* r) {
     lot->add_option("--baseline", a->options.baseline,
                     "values per feature the control limits come from (at least 20)")
         ->capture_default_str()
-        ->check(CLI::Range(std::size_t{report::kMinBaseline}, std::size_t{1000000}));
+        ->check(CLI::Range(std::size_t{quality::kMinBaseline}, std::size_t{1000000}));
     return [a] { return run_lot(*a); };
 }
 

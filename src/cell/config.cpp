@@ -279,7 +279,7 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
             const std::string w = "results";
             y.expect_map(r, w,
                          {"dir", "archive_dir", "archive_quota_gb", "archive_every_nth_ok", "sync",
-                          "drift_baseline", "lot_report"});
+                          "drift_baseline", "lot_report", "lot_report_every_s"});
             if (r["dir"]) c.results.dir = base / y.string(r["dir"], w + ".dir");
             if (r["archive_dir"])
                 c.archive.dir = base / y.string(r["archive_dir"], w + ".archive_dir");
@@ -290,6 +290,9 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
             if (r["sync"]) c.results.sync = y.boolean(r["sync"], w + ".sync");
             if (r["lot_report"])
                 c.quality.lot_report = y.boolean(r["lot_report"], w + ".lot_report");
+            c.quality.lot_report_every_s =
+                integer_in(y, r, w, "lot_report_every_s", 0, 3600,
+                           static_cast<int>(c.quality.lot_report_every_s));
             const int baseline = integer_in(y, r, w, "drift_baseline", 0, 100'000,
                                             static_cast<int>(c.quality.drift_baseline));
             if (baseline > 0 && baseline < static_cast<int>(quality::kMinBaseline))

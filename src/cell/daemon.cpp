@@ -692,7 +692,9 @@ void Daemon::Impl::prepare_results(const std::shared_ptr<const Setup>& s) {
         proc_setup->config.archive.quota_bytes == s->config.archive.quota_bytes &&
         proc_setup->config.archive.every_nth_ok == s->config.archive.every_nth_ok &&
         proc_setup->config.quality.drift_baseline == s->config.quality.drift_baseline &&
-        proc_setup->config.quality.lot_report == s->config.quality.lot_report && log) {
+        proc_setup->config.quality.lot_report == s->config.quality.lot_report &&
+        proc_setup->config.quality.lot_report_every_s == s->config.quality.lot_report_every_s &&
+        log) {
         proc_setup = s;
         return;
     }

@@ -36,14 +36,19 @@ QualityFeed::QualityFeed(const std::filesystem::path& results_dir, const Quality
         watch_.emplace(quality::DriftWatchConfig{config_.drift_baseline});
 }
 
+QualityFeed::~QualityFeed() {
+    if (unwritten_) write_report();
+}
+
 void QualityFeed::load(std::int64_t now_ns) {
     today_ = results::local_date(now_ns);
     parts_.clear();
-    const auto read = results::read_parts(dir_, {first_of_last_days(dir_, 3), ""});
+    const auto read = results::read_parts(dir_, {first_of_last_days(dir_, 3), ""}, true);
     if (!read) {  // a new cell has no results yet: nothing to go on from
         spdlog::info("quality: {}: starting without earlier results", read.error().message);
         return;
     }
+    for (const auto& why : read->skipped) spdlog::warn("quality: skipped {}", why);
     for (const auto& p : read->parts) {
         if (watch_ && !p.master_check)  // masters are no production
             for (const auto& f : p.features) watch_->add(p.die, p.recipe, f.name, watched(f));
@@ -70,6 +75,7 @@ void QualityFeed::stored(const std::string& jsonl_line, std::int64_t time_ns) {
     if (!config_.lot_report) return;
     const std::string day = results::local_date(time_ns);
     if (day != today_) {
+        if (unwritten_) write_report();  // the day's last parts
         today_ = day;
         parts_.clear();
     }
@@ -79,10 +85,14 @@ void QualityFeed::stored(const std::string& jsonl_line, std::int64_t time_ns) {
         spdlog::error("lot report: the results line does not read back: {}", e.what());
         return;
     }
-    write_report();
+    unwritten_ = true;
+    const std::chrono::duration<double> since = std::chrono::steady_clock::now() - written_;
+    if (since.count() >= config_.lot_report_every_s) write_report();
 }
 
-void QualityFeed::write_report() const {
+void QualityFeed::write_report() {
+    unwritten_ = false;
+    written_ = std::chrono::steady_clock::now();
     const auto t0 = std::chrono::steady_clock::now();
     report::LotOptions options;
     options.title = "Lot report " + today_ + " (hotgauged, updated after every part)";

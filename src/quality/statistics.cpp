@@ -73,6 +73,8 @@ core::Result<IndividualsChart> individuals_chart(std::span<const double> baselin
     c.centre = mean_of(baseline);
     c.mr_bar = mean_moving_range(baseline);
     c.sigma = within_sigma(c.mr_bar);
+    if (!(c.sigma > 0))  // rules and drift are in units of σ: limits of width 0 judge nothing
+        return core::make_error("control limits: the values do not change from one to the next");
     c.lcl = c.centre - 3.0 * c.sigma;
     c.ucl = c.centre + 3.0 * c.sigma;
     c.mr_ucl = kD4 * c.mr_bar;

@@ -49,9 +49,11 @@ std::string value_block(const results::PartRecord& p, const results::FeatureReco
     std::string s = field("K0001", c, f.cold_mm ? number(*f.cold_mm, 6) : "") +
                     field("K0002", c, std::to_string(used ? kValid : kNotUsed)) +
                     field("K0004", c, aqdef_time(p.time)) + field("K0006", c, p.part_id) +
-                    field("K0014", c, std::to_string(p.sequence));
-    if (!f.reason.empty()) s += field("K0009", c, f.verdict + ": " + f.reason.substr(0, 200));
-    return s;
+                    field("K0014", c, p.part_id);
+    // The text of the value (at most 255 characters): the results files' sequence, the reason.
+    std::string text = "seq " + std::to_string(p.sequence);
+    if (!f.reason.empty()) text += "; " + f.verdict + ": " + f.reason;
+    return s + field("K0009", c, text.substr(0, 255));
 }
 
 }  // namespace

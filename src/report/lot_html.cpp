@@ -4,18 +4,26 @@
 #include <string>
 
 #include "hotgauge/report/lot_report.hpp"
-#include "svg.hpp"
+#include "html.hpp"
 
 namespace hotgauge::report {
 namespace {
 
-using svg::escape;
-using svg::num;
+// A number with `decimals` decimals; "−" for a non-finite one (nothing is invented).
+std::string num(double v, int decimals) { return std::isfinite(v) ? fixed(v, decimals) : "\u2212"; }
+
+// Linear map from [d0, d1] (data) to [p0, p1] (pixels); an empty data range maps to the middle.
+struct Scale {
+    double d0, d1, p0, p1;
+    double operator()(double v) const {
+        return d1 == d0 ? (p0 + p1) / 2 : p0 + (v - d0) * (p1 - p0) / (d1 - d0);
+    }
+};
 
 constexpr double kChartW = 960, kLeft = 76, kRight = 16;
 
 // "y" axis ticks and labels of one panel, 5 of them.
-std::string y_axis(const svg::Scale& y, int decimals) {
+std::string y_axis(const Scale& y, int decimals) {
     std::string s;
     for (int k = 0; k <= 4; ++k) {
         const double v = y.d0 + (y.d1 - y.d0) * k / 4.0, py = y(v);
@@ -26,7 +34,7 @@ std::string y_axis(const svg::Scale& y, int decimals) {
     return s;
 }
 
-std::string hline(const svg::Scale& y, double v, const char* cls, const std::string& label) {
+std::string hline(const Scale& y, double v, const char* cls, const std::string& label) {
     const std::string py = num(y(v), 1);
     return "<line x1='" + num(kLeft, 1) + "' x2='" + num(kChartW - kRight, 1) + "' y1='" + py +
            "' y2='" + py + "' class='" + cls + "'/><text x='" + num(kChartW - kRight - 2, 1) +
@@ -34,7 +42,7 @@ std::string hline(const svg::Scale& y, double v, const char* cls, const std::str
            "</text>";
 }
 
-std::string polyline(const svg::Scale& x, const svg::Scale& y, const std::vector<double>& v,
+std::string polyline(const Scale& x, const Scale& y, const std::vector<double>& v,
                      std::size_t first) {
     std::string pts;
     pts.reserve(16 * v.size());
@@ -45,7 +53,7 @@ std::string polyline(const svg::Scale& x, const svg::Scale& y, const std::vector
 
 // The individuals chart's panel: values, baseline, centre and control limits, the tolerance
 // when it is near, rule violations and the drift warning.
-std::string individuals_panel(const FeatureLot& f, const svg::Scale& x, double top, double h) {
+std::string individuals_panel(const FeatureLot& f, const Scale& x, double top, double h) {
     auto [mn, mx] = std::minmax_element(f.values.begin(), f.values.end());
     double lo = *mn, hi = *mx;
     if (f.chart) lo = std::min(lo, f.chart->lcl), hi = std::max(hi, f.chart->ucl);
@@ -54,7 +62,7 @@ std::string individuals_panel(const FeatureLot& f, const svg::Scale& x, double t
     if (lsl > lo - near) lo = std::min(lo, lsl);
     if (usl < hi + near) hi = std::max(hi, usl);
     const double pad = 0.06 * std::max(hi - lo, 1e-4);
-    const svg::Scale y{lo - pad, hi + pad, top + h, top};
+    const Scale y{lo - pad, hi + pad, top + h, top};
     std::string s = y_axis(y, 4);
     if (f.chart) {
         s += "<rect class='baseline' x='" + num(x(0) - 2, 1) + "' y='" + num(top, 1) + "' width='" +
@@ -79,12 +87,12 @@ std::string individuals_panel(const FeatureLot& f, const svg::Scale& x, double t
     return s;
 }
 
-std::string moving_range_panel(const FeatureLot& f, const svg::Scale& x, double top, double h) {
+std::string moving_range_panel(const FeatureLot& f, const Scale& x, double top, double h) {
     std::vector<double> mr(f.values.size(), 0.0);
     for (std::size_t i = 1; i < mr.size(); ++i) mr[i] = std::abs(f.values[i] - f.values[i - 1]);
     double hi = *std::max_element(mr.begin(), mr.end());
     if (f.chart) hi = std::max(hi, f.chart->mr_ucl);
-    const svg::Scale y{0, std::max(hi * 1.08, 1e-4), top + h, top};
+    const Scale y{0, std::max(hi * 1.08, 1e-4), top + h, top};
     std::string s = y_axis(y, 4);
     if (f.chart) {
         s += hline(y, f.chart->mr_bar, "centre", "MR\u0304 " + num(f.chart->mr_bar, 4));
@@ -94,7 +102,7 @@ std::string moving_range_panel(const FeatureLot& f, const svg::Scale& x, double 
 }
 
 // The parts' sequence numbers under the chart, at 6 places.
-std::string x_axis(const FeatureLot& f, const svg::Scale& x, double y) {
+std::string x_axis(const FeatureLot& f, const Scale& x, double y) {
     std::string s = "<text x='4' y='" + num(y, 1) + "'>part</text>";
     for (int k = 0; k <= 5; ++k) {
         const auto i = std::size_t(std::lround(double(f.values.size() - 1) * k / 5.0));
@@ -106,7 +114,7 @@ std::string x_axis(const FeatureLot& f, const svg::Scale& x, double y) {
 
 std::string chart_svg(const FeatureLot& f) {
     const double n = double(std::max<std::size_t>(f.values.size(), 2));
-    const svg::Scale x{0, n - 1, kLeft + 6, kChartW - kRight - 6};
+    const Scale x{0, n - 1, kLeft + 6, kChartW - kRight - 6};
     return "<svg class='chart' xmlns='http://www.w3.org/2000/svg' width='960' height='346' "
            "viewBox='0 0 960 346'><text x='4' y='14'>individuals (mm)</text>" +
            individuals_panel(f, x, 22, 200) + "<text x='4' y='244'>moving range (mm)</text>" +
@@ -123,8 +131,8 @@ std::string histogram_svg(const FeatureLot& f) {
     std::vector<std::size_t> count(bins, 0);
     for (double v : f.values) ++count[std::min(bins - 1, std::size_t((v - *mn) / width))];
     const double lo = std::min(lsl, *mn), hi = std::max(usl, *mx), pad = 0.05 * (hi - lo);
-    const svg::Scale x{lo - pad, hi + pad, 20, 460};
-    const svg::Scale y{0, double(*std::max_element(count.begin(), count.end())), 190, 24};
+    const Scale x{lo - pad, hi + pad, 20, 460};
+    const Scale y{0, double(*std::max_element(count.begin(), count.end())), 190, 24};
     std::string s =
         "<svg class='histogram' xmlns='http://www.w3.org/2000/svg' width='480' "
         "height='220' viewBox='0 0 480 220'><text x='4' y='14'>values against the "
@@ -178,17 +186,20 @@ std::string summary_table(const Lot& lot) {
     std::string s =
         "<table class='summary'><tr><th class='l'>feature</th><th>nominal</th><th>LSL</th>"
         "<th>USL</th><th>OK</th><th>NOK</th><th>not measured</th><th>degraded</th><th>mean</th>"
-        "<th>s</th><th>Cp</th><th>Cpk</th><th>Pp</th><th>Ppk</th><th>rule marks</th>"
+        "<th>s</th><th>Cp</th><th>Cpk</th><th>Pp</th><th>Ppk</th><th>rule violations</th>"
         "<th>drift</th></tr>";
     for (std::size_t i = 0; i < lot.features.size(); ++i) {
         const FeatureLot& f = lot.features[i];
-        s += "<tr><td class='l'><a href='#f" + std::to_string(i) + "'>" + escape(f.name) +
+        s += "<tr><td class='l'><a href='#f" + std::to_string(i) + "'>" + escape(f.title) +
              "</a></td>" + cell(num(f.nominal_mm, 3)) + cell(num(f.nominal_mm + f.lower_mm, 3)) +
              cell(num(f.nominal_mm + f.upper_mm, 3)) + cell(count_of(f.verdicts, "OK")) +
              cell(count_of(f.verdicts, "NOK"), f.verdicts.count("NOK") ? "nok" : nullptr) +
              cell(count_of(f.verdicts, "NOT_MEASURED")) + cell(count_of(f.verdicts, "DEGRADED")) +
              index_cells(f) + cell(std::to_string(f.violations.size())) +
-             cell(f.drift_at ? std::string(quality::to_string(f.drift)) : "none",
+             cell(f.drift_at ? std::string(quality::to_string(f.first_drift)) + " from part " +
+                                   std::to_string(f.sequences[*f.drift_at]) +
+                                   (f.drift == quality::Drift::kNone ? ", ended" : "")
+                             : "none",
                   f.drift_at ? "nok" : nullptr) +
              "</tr>";
     }
@@ -196,7 +207,7 @@ std::string summary_table(const Lot& lot) {
 }
 
 std::string feature_section(const FeatureLot& f, std::size_t i) {
-    std::string s = "<section id='f" + std::to_string(i) + "'><h2>" + escape(f.name) + "</h2>";
+    std::string s = "<section id='f" + std::to_string(i) + "'><h2>" + escape(f.title) + "</h2>";
     if (f.values.empty()) return s + "<p>No value measured OK or NOK: no chart.</p></section>";
     s += chart_svg(f) + histogram_svg(f);
     if (f.chart)

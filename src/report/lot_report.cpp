@@ -5,16 +5,15 @@
 #include <map>
 #include <set>
 
-#include "svg.hpp"
-
 namespace hotgauge::report {
 namespace {
 
-FeatureLot& feature_lot(Lot& lot, const results::FeatureRecord& f) {
+FeatureLot& feature_lot(Lot& lot, const std::string& recipe, const results::FeatureRecord& f) {
     for (FeatureLot& fl : lot.features)
-        if (fl.name == f.name) return fl;
+        if (fl.recipe == recipe && fl.name == f.name) return fl;
     FeatureLot fl;
-    fl.name = f.name;
+    fl.recipe = recipe;
+    fl.name = fl.title = f.name;
     fl.nominal_mm = f.nominal_mm;
     fl.lower_mm = f.lower_mm;
     fl.upper_mm = f.upper_mm;
@@ -24,6 +23,7 @@ FeatureLot& feature_lot(Lot& lot, const results::FeatureRecord& f) {
 
 // Limits, rules, capability and drift of one feature's values.
 void add_statistics(FeatureLot& f, const LotOptions& options) {
+    constexpr std::size_t kMinBaseline = quality::kMinBaseline;
     if (f.values.size() < kMinBaseline) {
         f.no_statistics = std::to_string(f.values.size()) + " values measured OK or NOK, " +
                           std::to_string(kMinBaseline) + " needed for limits and indices";
@@ -42,7 +42,10 @@ void add_statistics(FeatureLot& f, const LotOptions& options) {
     f.violations = quality::western_electric(all, chart->centre, chart->sigma);
     quality::DriftMonitor drift(chart->centre, chart->sigma, {});
     for (std::size_t i = f.baseline; i < f.values.size(); ++i)
-        if (drift.add(f.values[i]) != quality::Drift::kNone && !f.drift_at) f.drift_at = i;
+        if (const auto d = drift.add(f.values[i]); d != quality::Drift::kNone && !f.drift_at) {
+            f.drift_at = i;
+            f.first_drift = d;
+        }
     f.drift = drift.state();
 }
 
@@ -84,7 +87,7 @@ void add_study(MasterStudy& m) {
 // The type-3 study of one feature over the parts measured more than once.
 RepeatStudy repeat_study(const FeatureLot& f,
                          const std::map<std::string, std::vector<double>>& by_id) {
-    RepeatStudy out{f.name, f.upper_mm - f.lower_mm};
+    RepeatStudy out{f.title, f.upper_mm - f.lower_mm};
     std::map<std::size_t, std::size_t> counts;  // values per part -> parts with that many
     for (const auto& [id, v] : by_id)
         if (v.size() >= 2) ++counts[v.size()];
@@ -112,14 +115,14 @@ RepeatStudy repeat_study(const FeatureLot& f,
 
 void add_repeat_studies(Lot& lot, const std::vector<results::PartRecord>& parts) {
     std::map<std::string, std::size_t> scans;  // part id -> production results
-    for (const auto& p : parts)
-        if (!p.master_check) ++scans[p.part_id];
+    for (const auto& p : parts)  // a PLC that sends no part id sends 0: no repeat of one part
+        if (!p.master_check && !p.part_id.empty() && p.part_id != "0") ++scans[p.part_id];
     if (std::none_of(scans.begin(), scans.end(), [](const auto& s) { return s.second > 1; }))
         return;
     for (const FeatureLot& f : lot.features) {
         std::map<std::string, std::vector<double>> by_id;
         for (const auto& p : parts) {
-            if (p.master_check || scans[p.part_id] < 2) continue;
+            if (p.master_check || p.recipe != f.recipe || scans[p.part_id] < 2) continue;
             for (const auto& r : p.features)
                 if (r.name == f.name && r.cold_mm && (r.verdict == "OK" || r.verdict == "NOK"))
                     by_id[p.part_id].push_back(*r.cold_mm);
@@ -157,7 +160,7 @@ Lot summarize_lot(const std::vector<results::PartRecord>& parts, const LotOption
         lot.last_sequence = p.sequence;
         ++lot.verdicts[p.verdict];
         for (const results::FeatureRecord& r : p.features) {
-            FeatureLot& f = feature_lot(lot, r);
+            FeatureLot& f = feature_lot(lot, p.recipe, r);
             ++f.verdicts[r.verdict];
             if (!r.reason.empty()) ++f.reasons[reason_group(r.reason)];
             if (r.cold_mm && (r.verdict == "OK" || r.verdict == "NOK")) {
@@ -166,7 +169,12 @@ Lot summarize_lot(const std::vector<results::PartRecord>& parts, const LotOption
             }
         }
     }
-    for (FeatureLot& f : lot.features) add_statistics(f, options);
+    std::set<std::string> recipes;
+    for (const FeatureLot& f : lot.features) recipes.insert(f.recipe);
+    for (FeatureLot& f : lot.features) {
+        if (recipes.size() > 1) f.title = f.name + " (" + f.recipe + ")";
+        add_statistics(f, options);
+    }
     for (MasterStudy& m : lot.masters) add_study(m);
     add_repeat_studies(lot, parts);
     return lot;

@@ -89,7 +89,8 @@ bool day_may_hold(const std::filesystem::path& file, const TimeRange& range) {
 }
 
 core::Result<void> read_file(const std::filesystem::path& path, const TimeRange& range,
-                             PartsRead& out, std::map<std::uint64_t, std::size_t>& at) {
+                             bool skip_bad_lines, PartsRead& out,
+                             std::map<std::uint64_t, std::size_t>& at) {
     std::ifstream in(path);
     if (!in) return core::make_error(path.string() + ": cannot open");
     ++out.files;
@@ -101,8 +102,11 @@ core::Result<void> read_file(const std::filesystem::path& path, const TimeRange&
         try {
             p = parse_result_line(text);
         } catch (const json::exception& e) {
-            return core::make_error(path.string() + ":" + std::to_string(n) +
-                                    ": not a result line: " + e.what());
+            std::string why =
+                path.string() + ":" + std::to_string(n) + ": not a result line: " + e.what();
+            if (!skip_bad_lines) return core::make_error(std::move(why));
+            out.skipped.push_back(std::move(why));
+            continue;
         }
         if (!range.contains(p.time)) continue;
         if (auto seen = at.find(p.sequence); seen != at.end()) {
@@ -125,14 +129,15 @@ bool TimeRange::contains(const std::string& time) const {
     return true;
 }
 
-core::Result<PartsRead> read_parts(const std::filesystem::path& dir, const TimeRange& range) {
+core::Result<PartsRead> read_parts(const std::filesystem::path& dir, const TimeRange& range,
+                                   bool skip_bad_lines) {
     const auto files = day_files(dir);
     if (!files) return files.error();
     PartsRead out;
     std::map<std::uint64_t, std::size_t> at;  // sequence → index in out.parts
     for (const auto& path : *files) {
         if (!day_may_hold(path, range)) continue;
-        if (auto ok = read_file(path, range, out, at); !ok) return ok.error();
+        if (auto ok = read_file(path, range, skip_bad_lines, out, at); !ok) return ok.error();
     }
     return out;
 }

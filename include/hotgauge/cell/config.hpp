@@ -56,7 +56,7 @@ struct DaemonConfig {
     std::optional<plc::PyrometerConfig> pyrometer;  // absent: the temperature comes from nowhere
     results::ResultsConfig results;
     results::ArchiveConfig archive;
-    QualityConfig quality;  // results.drift_baseline, results.lot_report
+    QualityConfig quality;  // results.drift_baseline, .lot_report, .lot_report_every_s
     std::string hash;       // of the file's bytes: goes with every result
 };
 

@@ -3,6 +3,7 @@
 // "In the daemon"): the drift watch per die, recipe and feature, whose state goes with every
 // result (results files, PLC registers), and the day's lot report, rewritten after every part.
 // Processing thread only.
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -16,32 +17,43 @@
 namespace hotgauge::cell {
 
 struct QualityConfig {
-    std::size_t drift_baseline = 50;  // values per die and feature before watching; 0: no watch
-    bool lot_report = true;           // results/YYYY-MM-DD.report.html
+    std::size_t drift_baseline = 100;  // values per die and feature before watching; 0: no watch
+    bool lot_report = true;            // results/YYYY-MM-DD.report.html
+    // The page is written at most this often (a page of 2 000 parts is 1.4 MB: written after
+    // every part that would be ~3 GB a day); the parts in between come with the next write, the
+    // day's last with the day change or the daemon's stop.
+    double lot_report_every_s = 30;
 };
 
 class QualityFeed {
   public:
     QualityFeed(const std::filesystem::path& results_dir, const QualityConfig& config);
+    ~QualityFeed();  // writes the page if parts came since the last write
+    QualityFeed(const QualityFeed&) = delete;
+    QualityFeed& operator=(const QualityFeed&) = delete;
 
     // The drift watch from the last 3 day files, and today's parts for the report (start and
-    // reload): what a restart would otherwise forget. Bad lines are logged and skipped.
+    // reload): what a restart would otherwise forget. Lines that are not results (a torn line
+    // of an older day) are logged and skipped.
     void load(std::int64_t now_ns);
     // Each feature's drift state after this production part (features measured OK or NOK feed
     // the watch; the others keep their state). Empty without a watch.
     std::vector<std::pair<std::string, std::string>> observe(int die,
                                                              const pipeline::PartResult& r);
-    // The part's results line, once stored: today's report rewritten (write, then rename, so a
-    // reader never sees half a page). A failure is logged; measuring goes on.
+    // The part's results line, once stored: today's report rewritten when lot_report_every_s has
+    // passed since the last write (write, then rename, so a reader never sees half a page). A
+    // failure is logged; measuring goes on.
     void stored(const std::string& jsonl_line, std::int64_t time_ns);
 
   private:
-    void write_report() const;
+    void write_report();
     std::filesystem::path dir_;
     QualityConfig config_;
     std::optional<quality::DriftWatch> watch_;
     std::string today_;  // local date of the parts below
     std::vector<results::PartRecord> parts_;
+    bool unwritten_ = false;  // parts came since the page was last written
+    std::chrono::steady_clock::time_point written_{};
 };
 
 }  // namespace hotgauge::cell

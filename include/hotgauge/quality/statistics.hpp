@@ -29,10 +29,6 @@ struct IndividualsChart {
 };
 core::Result<IndividualsChart> individuals_chart(std::span<const double> baseline);
 
-// Type-1 gauge study (VDA 5, Bosch booklet 10): repeated measurements of one reference part.
-// Cg = 0.2·T / (6·s), Cgk = (0.1·T − |x̄ − reference|) / (3·s); the bias's significance by
-// Student's t (two-sided, n − 1 degrees of freedom); the resolution as a share of T (at most
-// 5 % to pass).
 // Western Electric rules on an individuals chart (AT&T Statistical Quality Control Handbook,
 // 1956; Nelson rules 1, 5, 6 and 2 with 8 points), zones of the chart's within σ about its
 // centre. A violation is marked on the point that completes it, and only when that point is
@@ -47,6 +43,10 @@ struct RuleViolation {
 };
 std::vector<RuleViolation> western_electric(std::span<const double> x, double centre, double sigma);
 
+// Type-1 gauge study (VDA 5, Bosch booklet 10): repeated measurements of one reference part.
+// Cg = 0.2·T / (6·s), Cgk = (0.1·T − |x̄ − reference|) / (3·s); the bias's significance by
+// Student's t (two-sided, n − 1 degrees of freedom); the resolution as a share of T (at most
+// 5 % to pass).
 struct Type1Study {
     std::size_t n = 0;
     double mean = 0, s = 0, bias = 0;

@@ -10,7 +10,8 @@ namespace hotgauge::report {
 
 // One part type (K1001) per recipe, one characteristic (K2001) per feature; per measured part
 // and feature a value block: K0001 value, K0002 attribute, K0004 date/time, K0006 part id,
-// K0014 the cell's sequence number, K0009 the reason when there is one. A value not measured has
+// K0014 the part id (batch/ident and part ident), K0009 "seq N" (the results files' sequence
+// number) and the reason when there is one. A value not measured has
 // an empty K0001 and attribute 255, never a number; a degraded value keeps its number with
 // attribute 255 (left out of the evaluation, as in the lot report). Master checks are left out.
 // Lines end in CR LF; the text is ASCII (other characters become '?').

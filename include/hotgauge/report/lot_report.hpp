@@ -18,16 +18,16 @@ namespace hotgauge::report {
 
 struct LotOptions {
     // Control limits and the drift warning's baseline: the first values of each feature. With
-    // fewer than kMinBaseline measured values there are no limits, and the page says so.
+    // fewer than quality::kMinBaseline measured values there are no limits, and the page says so.
     std::size_t baseline = 25;
     std::string title = "Lot report";
 };
-inline constexpr std::size_t kMinBaseline = quality::kMinBaseline;  // the charts' too
 
 // One feature over the lot. Statistics use the values with verdict OK or NOK; degraded values
 // (measured with untrusted data) are counted and listed, not used.
 struct FeatureLot {
-    std::string name;
+    std::string recipe, name;  // a feature of a recipe: recipes may share feature names
+    std::string title;         // the name, with the recipe when the lot has several
     double nominal_mm = 0, lower_mm = 0, upper_mm = 0;  // limits as deviations from nominal
     std::vector<double> values;                         // cold, in part order
     std::vector<std::uint64_t> sequences;               // the part of each value
@@ -38,7 +38,8 @@ struct FeatureLot {
     std::optional<quality::Capability> capability;
     std::vector<quality::RuleViolation> violations;
     std::optional<std::size_t> drift_at;  // index in values of the first drift warning
-    quality::Drift drift = quality::Drift::kNone;
+    quality::Drift first_drift = quality::Drift::kNone;  // its direction at drift_at
+    quality::Drift drift = quality::Drift::kNone;        // at the lot's end
     std::string no_statistics;  // why there are no limits or indices, when there are none
 };
 

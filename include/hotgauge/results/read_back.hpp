@@ -55,13 +55,16 @@ PartRecord parse_result_line(const std::string& line);
 struct PartsRead {
     std::vector<PartRecord> parts;  // in file order (days by name), one per sequence number
     std::size_t files = 0, lines = 0;
+    std::vector<std::string> skipped;  // with skip_bad_lines: "file:line: why" of each
 };
 
 // Every `*.jsonl` file of `dir`, in name order (YYYY-MM-DD sorts by day; a day file outside the
 // range is not opened). A line repeated with the same sequence (an append retried after a full
 // disk) counts once, the last. Errors name the folder, or the file and line that is not a result
-// line.
-core::Result<PartsRead> read_parts(const std::filesystem::path& dir, const TimeRange& range = {});
+// line; with `skip_bad_lines` such a line is left out and named in `skipped` (the daemon, which
+// must go on with what it can read).
+core::Result<PartsRead> read_parts(const std::filesystem::path& dir, const TimeRange& range = {},
+                                   bool skip_bad_lines = false);
 
 struct FeatureValue {
     std::uint64_t sequence = 0;
