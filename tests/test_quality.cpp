@@ -253,3 +253,28 @@ TEST(DriftWatch, BaselineThenWatchPerDie) {
     for (int i = 0; i < 30; ++i) watch.add(4, "hub-a", "Height 1", 39.3);
     EXPECT_EQ(watch.state(4, "hub-a", "Height 1"), Watch::kBaseline);
 }
+
+// What the watch saves is what it goes on from: a watch restored from saved() gives the same
+// states as the one that never stopped, part after part.
+TEST(DriftWatch, RestoredFromWhatItSavedGoesOnTheSame) {
+    quality::DriftWatch a({.baseline = 25});
+    std::mt19937 rng(4);
+    std::normal_distribution<double> noise(0.0, 0.01);
+    for (int i = 0; i < 60; ++i) {
+        a.add(1, "hub-a", "Diameter 3", 69.5 + noise(rng) + 4e-4 * std::max(0, i - 40));
+        if (i < 40) a.add(2, "hub-a", "Height 1", 39.3 + noise(rng));  // 15 of 25 values
+    }
+    quality::DriftWatch b({.baseline = 25});
+    for (const auto& s : a.saved()) b.restore(s);
+    for (int i = 60; i < 200; ++i) {
+        const double d = 69.5 + noise(rng) + 4e-4 * (i - 40), h = 39.3 + noise(rng);
+        ASSERT_EQ(a.add(1, "hub-a", "Diameter 3", d), b.add(1, "hub-a", "Diameter 3", d)) << i;
+        ASSERT_EQ(a.add(2, "hub-a", "Height 1", h), b.add(2, "hub-a", "Height 1", h)) << i;
+    }
+    EXPECT_EQ(b.state(1, "hub-a", "Diameter 3"), quality::Watch::kUp);
+    EXPECT_EQ(b.state(2, "hub-a", "Height 1"), quality::Watch::kWatching);
+    quality::DriftWatch::Saved bad{1, "hub-a", "Diameter 3", {}, true, 69.5, 0.0, 69.5, 3};
+    quality::DriftWatch c;
+    c.restore(bad);  // σ 0: ignored
+    EXPECT_EQ(c.state(1, "hub-a", "Diameter 3"), quality::Watch::kBaseline);
+}

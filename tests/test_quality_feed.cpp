@@ -85,15 +85,23 @@ TEST(QualityFeed, DriftPerDieAndTheDaysReportGoOnAfterARestart) {
     EXPECT_NE(html.find("drift warning, part"), std::string::npos);
     EXPECT_FALSE(std::filesystem::exists(page.string() + ".tmp"));
 
-    // A restart: the watch is rebuilt from the files, so die 1 is still drifting; die 2 is new. A
-    // torn line in an older day's file is skipped, not the end of the watch.
+    // A restart: the watch as saved after the last part, so die 1 is still drifting; die 2 is
+    // new. Without the saved watch (or with a broken one), it is rebuilt from the results files,
+    // where a torn line in an older day's file is skipped, not the end of the watch.
+    ASSERT_TRUE(std::filesystem::exists(dir / "drift-watch.json"));
+    const auto r = part(69.5 + 0.1);
     std::ofstream(dir / "2026-11-17.jsonl") << "{\"sequence\": 1, \"time\": \"2026-11-17T23:5";
+    for (const char* saved : {"keep", "remove", "break"}) {
+        if (saved == std::string("remove")) std::filesystem::remove(dir / "drift-watch.json");
+        if (saved == std::string("break")) std::ofstream(dir / "drift-watch.json") << "{\"seri";
+        cell::QualityFeed restarted(dir, {.drift_baseline = 20, .lot_report = false});
+        restarted.load(t0 + 300'000'000);
+        EXPECT_EQ(state_of(restarted.observe(1, r)), "DRIFT_UP") << saved;
+        EXPECT_EQ(state_of(restarted.observe(2, r)), "BASELINE") << saved;
+    }
     cell::QualityFeed again(dir,
                             {.drift_baseline = 20, .lot_report = true, .lot_report_every_s = 0});
     again.load(t0 + 300'000'000);
-    const auto r = part(69.5 + 0.1);
-    EXPECT_EQ(state_of(again.observe(1, r)), "DRIFT_UP");
-    EXPECT_EQ(state_of(again.observe(2, r)), "BASELINE");
     results::ResultEntry e{t0 + 301'000'000, 301, &r, "v", "h", std::nullopt};
     ASSERT_TRUE(log->append(e).ok());
     again.stored(results::jsonl_line(e), e.time_ns);

@@ -37,6 +37,14 @@ core::Result<DriftMonitor> DriftMonitor::from_baseline(std::span<const double> b
 DriftMonitor::DriftMonitor(double mean, double sigma, const DriftConfig& config)
     : mean_(mean), sigma_(sigma), config_(config), z_(mean) {}
 
+DriftMonitor::DriftMonitor(double mean, double sigma, double z, std::size_t n,
+                           const DriftConfig& config)
+    : mean_(mean), sigma_(sigma), config_(config), z_(z), n_(n) {
+    if (n_ == 0) return;
+    const double off = z_ - mean_, lim = limit();
+    state_ = off > lim ? Drift::kUp : off < -lim ? Drift::kDown : Drift::kNone;
+}
+
 double DriftMonitor::limit() const {
     const double l = config_.lambda;
     const double grow = 1.0 - std::pow(1.0 - l, 2.0 * static_cast<double>(n_));
@@ -97,6 +105,35 @@ Watch DriftWatch::add(int die, const std::string& recipe, const std::string& fea
     if (auto m = DriftMonitor::from_baseline(s.baseline, config_.ewma)) s.monitor = *m;
     s.baseline.clear();
     return state_of(s);
+}
+
+std::vector<DriftWatch::Saved> DriftWatch::saved() const {
+    std::vector<Saved> out;
+    for (const auto& [key, s] : series_) {
+        Saved v{std::get<0>(key), std::get<1>(key), std::get<2>(key), s.baseline};
+        if (s.monitor) {
+            v.watching = true;
+            v.mean = s.monitor->mean();
+            v.sigma = s.monitor->sigma();
+            v.z = s.monitor->ewma();
+            v.n = s.monitor->count();
+        }
+        out.push_back(std::move(v));
+    }
+    return out;
+}
+
+void DriftWatch::restore(const Saved& v) {
+    Series s;
+    if (v.watching) {
+        if (!std::isfinite(v.mean) || !std::isfinite(v.z) || !std::isfinite(v.sigma) ||
+            !(v.sigma > 0))
+            return;
+        s.monitor = DriftMonitor(v.mean, v.sigma, v.z, v.n, config_.ewma);
+    } else {
+        s.baseline = v.baseline;
+    }
+    series_[{v.die, v.recipe, v.feature}] = std::move(s);
 }
 
 Watch DriftWatch::state(int die, const std::string& recipe, const std::string& feature) const {

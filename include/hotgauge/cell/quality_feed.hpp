@@ -32,9 +32,10 @@ class QualityFeed {
     QualityFeed(const QualityFeed&) = delete;
     QualityFeed& operator=(const QualityFeed&) = delete;
 
-    // The drift watch from the last 3 day files, and today's parts for the report (start and
-    // reload): what a restart would otherwise forget. Lines that are not results (a torn line
-    // of an older day) are logged and skipped.
+    // Start and reload: the drift watch as it was after the last part (results/
+    // drift-watch.json, written after every part), or, without that file, rebuilt from the last
+    // 3 day files; and today's parts for the report. Lines that are not results (a torn line of
+    // an older day) are logged and skipped.
     void load(std::int64_t now_ns);
     // Each feature's drift state after this production part (features measured OK or NOK feed
     // the watch; the others keep their state). Empty without a watch.
@@ -47,6 +48,8 @@ class QualityFeed {
 
   private:
     void write_report();
+    bool restore_watch();     // from results/drift-watch.json; false: no (usable) file
+    void save_watch() const;  // after every part
     std::filesystem::path dir_;
     QualityConfig config_;
     std::optional<quality::DriftWatch> watch_;

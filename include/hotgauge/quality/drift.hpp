@@ -35,6 +35,8 @@ class DriftMonitor {
     static core::Result<DriftMonitor> from_baseline(std::span<const double> baseline,
                                                     const DriftConfig& config = {});
     DriftMonitor(double mean, double sigma, const DriftConfig& config);
+    // Where a monitor was (DriftWatch::saved): its EWMA z after n values.
+    DriftMonitor(double mean, double sigma, double z, std::size_t n, const DriftConfig& config);
 
     // The next value; a non-finite one (not measured) is skipped and changes nothing.
     Drift add(double value);
@@ -73,6 +75,19 @@ class DriftWatch {
               std::optional<double> value);
     Watch state(int die, const std::string& recipe, const std::string& feature) const;
     const DriftWatchConfig& config() const { return config_; }
+
+    // What the watch knows, to be kept across a restart (docs/quality.md "In the daemon"): per
+    // die, recipe and feature the baseline being collected, or the monitor's μ, σ, z and n.
+    struct Saved {
+        int die = 0;
+        std::string recipe, feature;
+        std::vector<double> baseline;
+        bool watching = false;
+        double mean = 0, sigma = 0, z = 0;
+        std::size_t n = 0;
+    };
+    std::vector<Saved> saved() const;
+    void restore(const Saved& s);  // a monitor's state must be finite with σ > 0, else ignored
 
   private:
     struct Series {
