@@ -117,6 +117,9 @@ TEST(Daemon, ACameraThatIsNotThereFailsThePartWithItsReasonAndTheDaemonGoesOn) {
     plc.command(1, 1, 1);
     ASSERT_TRUE(plc.wait_state(plc::State::kFault, 30s));
     EXPECT_EQ(plc.input(plc::ir::kErrorCode), 203);
+    // The registers come first, the daemon's counts just after them: wait for those (bounded).
+    for (int i = 0; i < 200 && (*daemon)->stats().failed < 2; ++i)
+        std::this_thread::sleep_for(10ms);
     const auto stats = (*daemon)->stats();
     EXPECT_EQ(stats.triggers, 2u);
     EXPECT_EQ(stats.failed, 2u);
@@ -266,4 +269,44 @@ TEST(Daemon, AMasterCertificateMustFitItsSlotsRecipe) {
 }
 
 }  // namespace
+}  // namespace hotgauge
+
+namespace hotgauge {
+
+// Every result carries a hash over everything that decided it (issue 20): the same files give
+// the same hash; a recipe whose tolerance changed, or another calibration, gives another.
+TEST(Daemon, TheResultHashChangesWithTheRecipeAndTheGeometry) {
+    test::TempDir dir;
+    const std::string src = HOTGAUGE_SOURCE_DIR;
+    const auto recipe = dir.path / "hub-a.yaml", cal = dir.path / "calibration.yaml";
+    std::filesystem::copy_file(src + "/config/parts/hub-a.yaml", recipe);
+    std::filesystem::copy_file(src + "/config/calibration.yaml", cal);
+    std::string text = config_text(dir.path / "results");
+    for (const auto& [from, to] : {std::pair{src + "/config/parts/hub-a.yaml", recipe.string()},
+                                   std::pair{src + "/config/calibration.yaml", cal.string()}})
+        text.replace(text.find(from), from.size(), to);
+    const auto config = dir.path / "hotgauged.yaml";
+    write(config, text);
+    auto hash = [&] {
+        auto setup = cell::load_setup(config);
+        EXPECT_TRUE(setup) << setup.error().message;
+        return setup ? (*setup)->result_hash.at(1) : std::string();
+    };
+    const std::string first = hash();
+    EXPECT_EQ(first.size(), 16u);
+    EXPECT_EQ(hash(), first);
+    // A tolerance of the recipe: one character.
+    std::ifstream in(recipe);
+    std::string r((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const auto at = r.find("tolerance");
+    ASSERT_NE(at, std::string::npos);
+    const auto digit = r.find_first_of("123456789", at);
+    r[digit] = r[digit] == '9' ? '8' : static_cast<char>(r[digit] + 1);
+    write(recipe, r);
+    const std::string changed = hash();
+    EXPECT_NE(changed, first);
+    std::ofstream(cal, std::ios::app) << "# recalibrated\n";
+    EXPECT_NE(hash(), changed);
+}
+
 }  // namespace hotgauge

@@ -69,15 +69,24 @@ TEST(ResultsLog, CsvOpensInASpreadsheetAndJsonLinesCarryEverything) {
     const auto rows = lines(csv);
     ASSERT_EQ(rows.size(), 3u);
     EXPECT_EQ(
-        rows[0].rfind("time,sequence,part_id,recipe,temperature_c,verdict,degraded,drift,", 0), 0u);
+        rows[0].rfind("time,time_utc,sequence,part_id,recipe,temperature_c,verdict,degraded,drift,"
+                      "Diameter 1 value_mm,Diameter 1 deviation_mm,Diameter 1 verdict,"
+                      "Diameter 1 nominal_mm,Diameter 1 lower_limit_mm,Diameter 1 upper_limit_mm,"
+                      "Diameter 1 reason,",
+                      0),
+        0u)
+        << rows[0];
     // An independent reader: every row has the header's columns, the quoted id survives.
     const std::string check =
         std::string(HOTGAUGE_PYTHON) +
         " -c \"import csv,sys; r=list(csv.reader(open(sys.argv[1]))); " +
         "assert all(len(x)==len(r[0]) for x in r), [len(x) for x in r]; " +
-        "assert r[2][2]=='B,\\\"2\\\"', r[2][2]; " +
-        "assert r[1][8]=='60.0123' and r[1][11]=='' and r[1][13]=='NOT_MEASURED', r[1]; " +
-        "assert r[1][7]=='' and r[2][7]=='Diameter 1 DRIFT_UP; Diameter 3 DRIFT_DOWN', r[2]\" " +
+        "assert r[2][3]=='B,\\\"2\\\"', r[2][3]; " +
+        "assert r[1][9]=='60.0123' and r[1][16]=='' and r[1][18]=='NOT_MEASURED', r[1]; " +
+        "assert r[1][19]=='61.0000' and r[1][15]=='' and r[1][22].startswith('edge not found, "
+        "arc 12'), r[1]; " +
+        "assert r[1][1].endswith('Z') and r[1][1][:4]=='2026', r[1][1]; " +
+        "assert r[1][8]=='' and r[2][8]=='Diameter 1 DRIFT_UP; Diameter 3 DRIFT_DOWN', r[2]\" " +
         csv.string();
     EXPECT_EQ(std::system(check.c_str()), 0) << check;
 

@@ -258,6 +258,9 @@ class Line:
         self.archive_dir = os.path.join(workdir, "archive")
         self.config_path = os.path.join(workdir, "hotgauged.yaml")
         self.accel_port = free_port(socket.SOCK_DGRAM)
+        # The sensor's rate, as the virtual cell sends it (config/cell.yaml), for the daemon's ring.
+        with open(os.path.join(REPO, "config/cell.yaml")) as f:
+            self.accel_rate_hz = yaml.safe_load(f)["accelerometer"]["rate_hz"]
         self.plc_port = free_port()
         self.axis_port = free_port()  # fixed: a restarted cell comes back on the same one
         self.config_extra = config_extra
@@ -346,6 +349,7 @@ accelerometer:
   source: udp
   bind: 127.0.0.1:{self.accel_port}
   margin_s: 0.5
+  sample_rate_hz: {self.accel_rate_hz}
 axis:
   kind: modbus
   address: 127.0.0.1:{self.axis_port}
@@ -450,6 +454,8 @@ def table(parts, line):
         worst = max(worst, emax)
         rows.append(f"{name:<15} {nominal:8.2f} | {paper:8.2f} {perr:+6.2f} | {mean:11.3f} "
                     f"{emean:+20.4f} {emax:8.4f} {sd:6.4f}")
+    rows.append("truth: the simulator's ground truth of each part (what it forged), which a real "
+                "cell never has; paper: Table 2 of Bian et al. 2024")
     return "\n".join(rows), worst
 
 
@@ -489,7 +495,7 @@ def check_results_files(results_dir, parts):
     assert [j["part"]["part_id"] for j in lines] == [str(p["part_id"]) for p in parts], \
         "part ids in the files differ from the PLC's"
     for j in lines:
-        for key in ("config_hash", "software_version", "time"):
+        for key in ("config_hash", "result_hash", "software_version", "time"):
             assert j.get(key), f"sequence {j['sequence']}: no {key}"
         assert j["part"]["stage_ms"], "no stage timings"
     return csvs, jsonls, seqs, lines
@@ -710,6 +716,10 @@ def main():
                     f"nominal geometry only {before:.4f} mm off: calibration did not matter"
         print(f"results: {', '.join(os.path.join(line.results_dir, f) for f in csvs + jsonls)} "
               f"(sequence {seqs[0]}..{seqs[-1]})")
+        pages = sorted(glob.glob(os.path.join(line.results_dir, "*.report.html")))
+        if pages:
+            print(f"the day's lot report (open it in a browser): {', '.join(pages)}")
+        print(f"logs: {', '.join(sorted(glob.glob(os.path.join(workdir, '*.log'))))}")
         assert rcs.get("hotgauged") == 0, f"hotgauged exited with {rcs.get('hotgauged')}"
         if a.check_reports:
             import report_check

@@ -27,6 +27,26 @@ std::string file_hash(const fs::path& file) {
     return out;
 }
 
+}  // namespace
+
+std::string files_hash(const std::vector<fs::path>& files, const std::string& extra) {
+    std::string bytes;
+    for (const auto& file : files) {
+        std::ifstream in(file, std::ios::binary);
+        bytes += file.filename().string() + '\0';
+        bytes.append(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+        bytes += '\0';
+    }
+    bytes += extra;
+    char out[17];
+    std::snprintf(out, sizeof out, "%016llx",
+                  static_cast<unsigned long long>(io::fnv1a64(
+                      reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size())));
+    return out;
+}
+
+namespace {
+
 double positive(const YamlReader& y, const YAML::Node& map, const std::string& what,
                 const char* key, double fallback) {
     const double v = y.number_or(map, what, key, fallback);
@@ -222,9 +242,11 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
         if (const YAML::Node a = root["accelerometer"]) {
             const std::string w = "accelerometer";
             y.expect_map(a, w,
-                         {"source", "bind", "sensor_id", "device_dir", "buffer_path", "margin_s"});
+                         {"source", "bind", "sensor_id", "device_dir", "buffer_path", "margin_s",
+                          "sample_rate_hz"});
             const std::string source = y.string(y.require(a, w, "source"), w + ".source");
             c.accel_margin_s = positive(y, a, w, "margin_s", c.accel_margin_s);
+            c.accel_rate_hz = positive(y, a, w, "sample_rate_hz", c.accel_rate_hz);
             if (source != "none") {
                 auto kind = accel::parse_accel_source_kind(source);
                 if (!kind || *kind == accel::AccelSourceKind::recording)

@@ -136,6 +136,24 @@ std::string verdict_text(const pipeline::PartResult& r, const pipeline::Verifica
 
 }  // namespace
 
+namespace {
+
+// Setup::result_hash: per slot, the files that decide its results and the software version.
+std::map<int, std::string> result_hashes(const Setup& s) {
+    std::map<int, std::string> out;
+    for (const auto& [slot, recipe_file] : s.config.recipes) {
+        std::vector<std::filesystem::path> files{s.config.file, s.config.calibration_file,
+                                                 recipe_file};
+        for (const auto* more : {&s.config.models, &s.config.masters})
+            if (auto it = more->find(slot); it != more->end()) files.push_back(it->second);
+        if (const auto& mesh = s.recipes.at(slot).mesh_file; !mesh.empty()) files.push_back(mesh);
+        out[slot] = files_hash(files, HOTGAUGE_VERSION);
+    }
+    return out;
+}
+
+}  // namespace
+
 core::Result<std::shared_ptr<const Setup>> load_setup(const fs::path& config_file) {
     auto config = read_daemon_config(config_file);
     if (!config) return config.error();
@@ -187,6 +205,7 @@ core::Result<std::shared_ptr<const Setup>> load_setup(const fs::path& config_fil
                                         std::to_string(slot) + ")");
         s->masters.emplace(slot, std::move(*cert));
     }
+    s->result_hash = result_hashes(*s);
     auto tri = calib::triangulation(s->calibration.sensor);
     if (!tri)
         return core::make_error(s->config.calibration_file.string() + ": " + tri.error().message);
@@ -858,6 +877,9 @@ void Daemon::Impl::process(Captured c) {
     entry.software_version = HOTGAUGE_VERSION;
     entry.config_hash = job.setup->config.hash;
     entry.die_id = job.trigger.die_id;
+    if (auto h = job.setup->result_hash.find(job.trigger.recipe_slot);
+        h != job.setup->result_hash.end())
+        entry.result_hash = h->second;
     if (quality && !is_master && !c.fault) entry.drift = quality->observe(entry.die_id, r);
     // The raw recording is written after the registers (it is large, and the PLC is waiting);
     // the results line names the folder it goes to, and a failure to write it is logged.
@@ -880,7 +902,6 @@ void Daemon::Impl::process(Captured c) {
             spdlog::error("seq {}: raw archive: {} (the results line names {})", job.sequence,
                           where.error().message, *entry.archived_as);
     }
-    if (quality && stored) quality->stored(results::jsonl_line(entry), t_result);
     {
         std::lock_guard lock(stats_mutex);
         stats.last = PartTiming{job.sequence,    c.last_profile_ns, published,
@@ -904,6 +925,8 @@ void Daemon::Impl::process(Captured c) {
               verdict_field(c.fault != 0 || !stored,
                             to_plc(r, verification ? &*verification : nullptr).overall),
               msg.str(), problem});
+    // Last: the stats and the log above are the part's outcome, the day's page can wait.
+    if (quality && stored) quality->stored(results::jsonl_line(entry), t_result);
 }
 
 // ---- Daemon --------------------------------------------------------------------------------
@@ -927,8 +950,10 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
         const double part_s = static_cast<double>(c.faces.size()) *
                                   (c.acquisition.scan_s + c.axis.timeout_ms * 1e-3) +
                               4 * c.accel_margin_s;
-        impl->ring = std::make_unique<accel::AccelRing>(accel::AccelRingConfig{
-            .capacity_s = 2 * part_s + 10.0, .sample_rate_hz = 4000.0, .gap_periods = 3.0});
+        impl->ring = std::make_unique<accel::AccelRing>(
+            accel::AccelRingConfig{.capacity_s = 2 * part_s + 10.0,
+                                   .sample_rate_hz = c.accel_rate_hz,
+                                   .gap_periods = 3.0});
         auto src = accel::make_accel_source(*c.accelerometer, *impl->ring);
         if (!src) return core::make_error("accelerometer: " + src.error().message);
         impl->accel = std::move(*src);

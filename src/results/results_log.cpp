@@ -75,22 +75,35 @@ std::string local_date(std::int64_t time_ns) {
     return date;
 }
 
+std::string utc_iso8601(std::int64_t time_ns) {
+    const std::time_t secs = static_cast<std::time_t>(time_ns / 1'000'000'000);
+    std::tm tm{};
+    gmtime_r(&secs, &tm);
+    char date[32], out[48];
+    std::strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%S", &tm);
+    std::snprintf(out, sizeof out, "%s.%03ldZ", date,
+                  static_cast<long>((time_ns / 1'000'000) % 1000));
+    return out;
+}
+
+// A spreadsheet user reads each row alone: per feature its value, deviation and verdict, the
+// drawing's nominal and limits, and why it is not measured, NOK or degraded.
 std::string csv_header(const pipeline::PartResult& r) {
-    std::string h = "time,sequence,part_id,recipe,temperature_c,verdict,degraded,drift";
-    for (const auto& f : r.measurement.features) {
-        h += "," + cell(f.name + " value_mm");
-        h += "," + cell(f.name + " deviation_mm");
-        h += "," + cell(f.name + " verdict");
-    }
+    std::string h = "time,time_utc,sequence,part_id,recipe,temperature_c,verdict,degraded,drift";
+    for (const auto& f : r.measurement.features)
+        for (const char* column : {" value_mm", " deviation_mm", " verdict", " nominal_mm",
+                                   " lower_limit_mm", " upper_limit_mm", " reason"})
+            h += "," + cell(f.name + column);
     return h;
 }
 
 std::string csv_row(const ResultEntry& e) {
     const auto& r = *e.result;
     const auto& m = r.measurement;
-    std::string row = local_iso8601(e.time_ns) + "," + std::to_string(e.sequence) + "," +
-                      cell(r.part_id) + "," + cell(r.recipe) + "," + number(m.temperature_c, 1) +
-                      "," + measure::to_string(m.verdict) + "," + (r.degraded ? "yes" : "no");
+    std::string row = local_iso8601(e.time_ns) + "," + utc_iso8601(e.time_ns) + "," +
+                      std::to_string(e.sequence) + "," + cell(r.part_id) + "," + cell(r.recipe) +
+                      "," + number(m.temperature_c, 1) + "," + measure::to_string(m.verdict) + "," +
+                      (r.degraded ? "yes" : "no");
     std::string drifting;  // "Diameter 3 DRIFT_UP; …": the features the watch warns of
     for (const auto& [name, state] : e.drift)
         if (state.rfind("DRIFT", 0) == 0)
@@ -99,7 +112,9 @@ std::string csv_row(const ResultEntry& e) {
     for (const auto& f : m.features) {
         // The value a quality engineer compares with the drawing: cold, in mm.
         row += "," + number(f.cold_mm, 4) + "," + number(f.deviation_mm, 4) + "," +
-               measure::to_string(f.verdict);
+               measure::to_string(f.verdict) + "," + number(f.nominal_mm, 4) + "," +
+               number(f.nominal_mm + f.tol_lower_mm, 4) + "," +
+               number(f.nominal_mm + f.tol_upper_mm, 4) + "," + cell(f.reason);
     }
     return row;
 }
@@ -144,6 +159,7 @@ std::string jsonl_line(const ResultEntry& e) {
     j["sequence"] = e.sequence;
     j["software_version"] = e.software_version;
     j["config_hash"] = e.config_hash;
+    j["result_hash"] = e.result_hash;
     j["archived_as"] = e.archived_as ? nlohmann::json(*e.archived_as) : nlohmann::json();
     j["die"] = e.die_id;
     j["drift"] = nlohmann::json::object();

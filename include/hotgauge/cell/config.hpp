@@ -51,6 +51,9 @@ struct DaemonConfig {
     AcquisitionConfig acquisition;
     std::optional<accel::AccelSourceConfig> accelerometer;  // absent: no compensation
     double accel_margin_s = 0.75;
+    // The sensor's sample rate: sizes the ring and sets its gap threshold (a datagram whose
+    // period differs by more than 1 % is logged once).
+    double accel_rate_hz = 4000.0;
     AxisConfig axis;
     plc::ServerConfig plc;
     std::optional<plc::PyrometerConfig> pyrometer;  // absent: the temperature comes from nowhere
@@ -59,6 +62,10 @@ struct DaemonConfig {
     QualityConfig quality;  // results.drift_baseline, .lot_report, .lot_report_every_s
     std::string hash;       // of the file's bytes: goes with every result
 };
+
+// FNV-1a over each file's name and bytes and then `extra`, as 16 hex digits: a hash of
+// everything that decided a result (daemon.hpp's Setup::result_hash).
+std::string files_hash(const std::vector<std::filesystem::path>& files, const std::string& extra);
 
 // Reads and validates; errors name file:line and the key. Referenced files (recipes, models,
 // the calibration) must exist; their content is checked by their own readers at start.

@@ -42,6 +42,10 @@ struct Setup {
     std::map<int, core::Recipe> recipes;                        // by PLC recipe slot
     std::map<int, std::shared_ptr<const match::Model>> models;  // by slot
     std::map<int, core::MasterCertificate> masters;             // master slots
+    // By slot: a hash over everything that decides a result there (the daemon config, the
+    // calibration, the recipe, a saved model, a master certificate, the software version), with
+    // every result: a changed tolerance is a changed hash.
+    std::map<int, std::string> result_hash;
     std::optional<acquire::Triangulation> triangulation;
     acquire::ExposureTable exposure;
 };

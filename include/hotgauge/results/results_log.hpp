@@ -42,6 +42,7 @@ struct ResultEntry {
     // The drift watch's state per feature after this part (docs/quality.md "In the daemon"):
     // feature name -> BASELINE, WATCHING, DRIFT_UP, DRIFT_DOWN. Empty: no watch.
     std::vector<std::pair<std::string, std::string>> drift;
+    std::string result_hash;  // over everything that decided it (cell::Setup::result_hash)
 };
 
 // Thread safety: one thread appends.
@@ -90,7 +91,9 @@ std::string verification_csv_row(const ResultEntry& entry);  // entry.verificati
 // on from there after a restart.
 std::uint64_t last_sequence(const std::filesystem::path& dir);
 
-// "2026-11-22T07:15:03.123+01:00" (local time with its offset) and "2026-11-22" (local date).
+// "2026-11-22T07:15:03.123+01:00" (local time with its offset), "2026-11-22T06:15:03.123Z" (UTC)
+// and "2026-11-22" (local date).
+std::string utc_iso8601(std::int64_t time_ns);
 std::string local_iso8601(std::int64_t time_ns);
 std::string local_date(std::int64_t time_ns);
 
