@@ -128,9 +128,9 @@ void QualityFeed::load(std::int64_t now_ns) {
             for (const auto& f : p.features) watch_->add(p.die, p.recipe, f.name, watched(f));
         if (p.time.compare(0, today_.size(), today_) == 0) parts_.push_back(p);
     }
-    spdlog::info(
-        "quality: drift watch from {} results in {} day files; today's report has {} parts",
-        read->parts.size(), read->files, parts_.size());
+    spdlog::info("quality: {} results read from {} day files{}; today's report has {} parts",
+                 read->parts.size(), read->files,
+                 watch_ && !restored ? " (the drift watch rebuilt from them)" : "", parts_.size());
 }
 
 std::vector<std::pair<std::string, std::string>> QualityFeed::observe(
