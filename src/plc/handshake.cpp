@@ -172,7 +172,7 @@ core::Result<void> Handshake::finish(std::uint32_t trigger_id, const PartResult&
         inputs_[a + ir::kValueMm + 1] = m[1];
         inputs_[a + ir::kVerdict] = static_cast<std::uint16_t>(f.verdict);
         inputs_[a + ir::kDrift] = static_cast<std::uint16_t>(f.drift);
-        drifting += f.drift == DriftState::kUp || f.drift == DriftState::kDown ? 1 : 0;
+        if (f.drift == DriftState::kUp || f.drift == DriftState::kDown) ++drifting;
     }
     inputs_[ir::kDriftCount] = drifting;
     inputs_[ir::kFeatureCount] = static_cast<std::uint16_t>(result.features.size());

@@ -63,7 +63,7 @@ const char* to_string(Watch w);
 
 struct DriftWatchConfig {
     std::size_t baseline = 100;  // values per die and feature before watching; at least 20
-    DriftConfig ewma;
+    DriftConfig ewma{};
 };
 
 class DriftWatch {

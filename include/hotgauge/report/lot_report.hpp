@@ -50,9 +50,9 @@ inline constexpr std::size_t kMinMasterChecks = 10;  // fewer: no study (VDA 5 a
 struct MasterStudy {
     std::string master, feature;
     double reference_mm = 0, tolerance_mm = 0;
-    std::vector<double> values;
-    std::optional<quality::Type1Study> study;
-    std::string no_study;  // why there is none
+    std::vector<double> values{};
+    std::optional<quality::Type1Study> study{};
+    std::string no_study{};  // why there is none
 };
 
 // A type-3 gauge study from repeat scans in the lot (docs/quality.md): production parts whose
@@ -63,8 +63,8 @@ struct RepeatStudy {
     std::string feature;
     double tolerance_mm = 0;
     std::size_t parts = 0, repeats = 0;
-    std::optional<quality::Type3Study> study;
-    std::string no_study;
+    std::optional<quality::Type3Study> study{};
+    std::string no_study{};
 };
 
 struct Lot {

@@ -41,8 +41,8 @@ struct ResultEntry {
     int die_id = 0;  // the die the PLC named (0: not named)
     // The drift watch's state per feature after this part (docs/quality.md "In the daemon"):
     // feature name -> BASELINE, WATCHING, DRIFT_UP, DRIFT_DOWN. Empty: no watch.
-    std::vector<std::pair<std::string, std::string>> drift;
-    std::string result_hash;  // over everything that decided it (cell::Setup::result_hash)
+    std::vector<std::pair<std::string, std::string>> drift{};
+    std::string result_hash{};  // over everything that decided it (cell::Setup::result_hash)
 };
 
 // Thread safety: one thread appends.
