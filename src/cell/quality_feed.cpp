@@ -12,12 +12,6 @@
 namespace hotgauge::cell {
 namespace {
 
-// The value a feature gives the watch: measured OK or NOK (a degraded value is not trusted).
-std::optional<double> watched(const results::FeatureRecord& f) {
-    if (f.verdict == "OK" || f.verdict == "NOK") return f.cold_mm;
-    return std::nullopt;
-}
-
 // The last `days` day files' first day (YYYY-MM-DD), as a range bound.
 std::string first_of_last_days(const std::filesystem::path& dir, std::size_t days) {
     std::vector<std::string> names;
@@ -125,7 +119,7 @@ void QualityFeed::load(std::int64_t now_ns) {
     for (const auto& why : read->skipped) spdlog::warn("quality: skipped {}", why);
     for (const auto& p : read->parts) {
         if (watch_ && !restored && !p.master_check)  // masters are no production
-            for (const auto& f : p.features) watch_->add(p.die, p.recipe, f.name, watched(f));
+            for (const auto& f : p.features) watch_->add(p.die, p.recipe, f.name, f.usable_mm());
         if (p.time.compare(0, today_.size(), today_) == 0) parts_.push_back(p);
     }
     spdlog::info("quality: {} results read from {} day files{}; today's report has {} parts",

@@ -45,7 +45,7 @@ std::string characteristics(const std::string& recipe, const PartType& t) {
 
 std::string value_block(const results::PartRecord& p, const results::FeatureRecord& f,
                         std::size_t c) {
-    const bool used = f.cold_mm && (f.verdict == "OK" || f.verdict == "NOK");
+    const bool used = f.usable_mm().has_value();
     std::string s = field("K0001", c, f.cold_mm ? number(*f.cold_mm, 6) : "") +
                     field("K0002", c, std::to_string(used ? kValid : kNotUsed)) +
                     field("K0004", c, aqdef_time(p.time)) + field("K0006", c, p.part_id) +

@@ -65,8 +65,7 @@ void add_master_check(Lot& lot, const results::PartRecord& p) {
             if (f.name != name) continue;
             MasterStudy& m = master_study(lot, p.master, name, certified);
             m.tolerance_mm = f.upper_mm - f.lower_mm;
-            if (f.cold_mm && (f.verdict == "OK" || f.verdict == "NOK"))
-                m.values.push_back(*f.cold_mm);
+            if (f.usable_mm()) m.values.push_back(*f.cold_mm);
         }
 }
 
@@ -124,8 +123,7 @@ void add_repeat_studies(Lot& lot, const std::vector<results::PartRecord>& parts)
         for (const auto& p : parts) {
             if (p.master_check || p.recipe != f.recipe || scans[p.part_id] < 2) continue;
             for (const auto& r : p.features)
-                if (r.name == f.name && r.cold_mm && (r.verdict == "OK" || r.verdict == "NOK"))
-                    by_id[p.part_id].push_back(*r.cold_mm);
+                if (r.name == f.name && r.usable_mm()) by_id[p.part_id].push_back(*r.cold_mm);
         }
         lot.repeats.push_back(repeat_study(f, by_id));
     }
@@ -163,7 +161,7 @@ Lot summarize_lot(const std::vector<results::PartRecord>& parts, const LotOption
             FeatureLot& f = feature_lot(lot, p.recipe, r);
             ++f.verdicts[r.verdict];
             if (!r.reason.empty()) ++f.reasons[reason_group(r.reason)];
-            if (r.cold_mm && (r.verdict == "OK" || r.verdict == "NOK")) {
+            if (r.usable_mm()) {
                 f.values.push_back(*r.cold_mm);
                 f.sequences.push_back(p.sequence);
             }

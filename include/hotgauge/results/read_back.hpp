@@ -23,6 +23,11 @@ struct FeatureRecord {
     std::optional<double> u_cold_mm;
     std::string verdict;  // OK, NOK, NOT_MEASURED, DEGRADED
     std::string reason;   // why not measured / NOK / degraded; "" when none
+    // The value statistics, studies and the drift watch use: measured OK or NOK (a degraded
+    // value was measured with data the cell does not trust).
+    std::optional<double> usable_mm() const {
+        return verdict == "OK" || verdict == "NOK" ? cold_mm : std::nullopt;
+    }
 };
 
 // One result line: a part, or a master check (`verification` in the line).
