@@ -38,6 +38,14 @@ BIN_DIR = sys.argv[1]
 ADDRESS = "127.0.0.8"  # this test's own camera address
 
 
+def wait_health(plc, bits, what, timeout, clear=False):
+    """The PLC's device-health register (input 113) with `bits` set (or clear), bounded."""
+    def seen():
+        r = vl.decode(plc.inputs())
+        return r if ((r["health"] & bits) == 0) == clear else None
+    return vl.wait_for(seen, what, timeout)
+
+
 class UdpRelay(vl.DatagramReceiver):
     """Passes the accelerometer's datagrams on to the daemon while `on`."""
 
@@ -156,9 +164,15 @@ def main():
 
         step("3. the accelerometer stream stops")
         relay.on = False
-        time.sleep(1.0)
+        silent = wait_health(plc, 0b10, "the accelerometer's health bit", 2.0)
+        print(f"   PLC device health {silent['health']:#x} (accelerometer) after relay off")
         p = part()
         last = jsonl(line)[-1]["part"]
+        # The PLC's reason bits say what the results file says, feature by feature.
+        bits = vl.check_reasons(p, jsonl(line)[-1])
+        print(f"   PLC reasons: part {bits:#x}, features "
+              f"{ {s: f['reasons'] for s, f in p['features'].items() if f['reasons']} }")
+        assert bits & vl.DEGRADED_BIT, f"a degraded part without the degraded reason: {bits:#x}"
         print("   degraded:", last["degraded_reasons"][:2])
         assert last["degraded"], "no accelerometer: the part must be flagged degraded"
         assert any("accelerometer" in why for why in last["degraded_reasons"]), last
@@ -178,7 +192,7 @@ def main():
             assert same, (f, g)
         print(f"   re-measured {archived}: all {len(again['features'])} features identical")
         relay.on = True
-        time.sleep(1.0)
+        wait_health(plc, 0b10, "the accelerometer back", 3.0, clear=True)
         alive(line)
         files_intact()
 
@@ -237,7 +251,14 @@ def main():
         # positions count from a scan's first frame, so that scan would be 14 mm off, and the
         # soak saw such a part published NOK): the face is scanned again.
         conveyor.close()
+        plc.to_idle()
+        killed = time.monotonic()
         kill_cell()
+        # IDLE, nothing triggered: the camera's loss shows in the health register all the same.
+        r = wait_health(plc, 0b1, "the camera's health bit after the kill", 2.0)
+        print(f"   camera killed while IDLE: PLC device health {r['health']:#x} after "
+              f"{time.monotonic() - killed:.2f} s (state {r['state']})")
+        assert r["state"] == vl.IDLE, r["state"]
         line.cell_extra = ["--lose-scan-start", "7", "--lose-scan-start-count", "1"]
         conveyor = start_cell_again("virtual-cell-restarted")
         p = part()
@@ -302,6 +323,8 @@ def main():
         verdicts = {f["name"]: f["verdict"] for f in last["features"]}
         print("   features:", verdicts)
         assert "NOK" not in verdicts.values(), verdicts
+        bits = vl.check_reasons(p, jsonl(line)[-1])
+        assert bits & vl.FACE_MISSING, f"a face left out, but the part's reasons are {bits:#x}"
         # The other faces' features are measured, but the pose was found without the top face:
         # degraded, so that they sort nothing.
         others = [f for f in last["features"] if "top" not in f["faces"]]

@@ -75,7 +75,7 @@ h1=$(reg 0)
 for _ in $(seq 1 50); do [ "$(reg 0)" != "$h1" ] && break; sleep 0.05; done
 [ "$(reg 0)" != "$h1" ] || fail "heartbeat stalled at $h1"
 expect "state" "$(reg 1)" 1
-expect "map version" "$(reg 14)" 3
+expect "map version" "$(reg 14)" 4
 expect "feature 1 while IDLE" "$(reg 16 3:int -B)" -2147483648
 
 # Trigger: part id 1234 (uint32, big word order), recipe slot 1, all faces; then the command.
@@ -109,7 +109,7 @@ expect "features checked" "$n" 13
 [ "$(reg 16 3:int)" != "$(reg 16 3:int -B)" ] || fail "word order made no difference"
 
 # Outside the map: exception 02 (mbpoll fails and says so); nothing changes.
-if mb -r 112 -t 3 127.0.0.1 > "$tmp/out" 2>&1; then fail "read past the map succeeded"; fi
+if mb -r 123 -t 3 127.0.0.1 > "$tmp/out" 2>&1; then fail "read past the map succeeded"; fi
 grep -qi "illegal data address" "$tmp/out" || fail "no exception 02: $(cat "$tmp/out")"
 if mb -r 100 -t 4 127.0.0.1 7 > "$tmp/out" 2>&1; then fail "write to the mirror succeeded"; fi
 grep -qi "illegal data address" "$tmp/out" || fail "no exception 02: $(cat "$tmp/out")"

@@ -26,7 +26,7 @@ BIN = sys.argv[1]
 RECIPE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "config", "parts",
                       "hub-a.yaml")
 UNIT = 1
-N_INPUTS = 112
+N_INPUTS = 123
 IDLE, BUSY, DONE, FAULT = 1, 2, 3, 4
 TRIGGER, ACK, RESET = 1, 2, 3
 INVALID = -0x80000000
@@ -156,18 +156,29 @@ def check_order(tmp, recipe, name, wordorder):
         wait_for(lambda: (plc.inputs(0, 1)[0] - h0) % 65536 >= 3, "the heartbeat to advance")
         plc.write(5, [321])
         assert plc.inputs(10, 1)[0] == 321, "PLC heartbeat echo"
-        assert plc.inputs()[1] == IDLE and plc.inputs()[14] == 3, "IDLE, map version 3"
+        assert plc.inputs()[1] == IDLE and plc.inputs()[14] == 4, "IDLE, map version 4"
 
         # A full cycle, with a refused trigger while BUSY.
         part = 4242 + 70000  # above 65535: both words of the part id carry bits
         plc.trigger(part)
         assert plc.state() == BUSY
+        assert plc.inputs(112, 1)[0] == 1, "scan phase: scanning"
+        t_trigger = time.time()
         plc.trigger(part + 1)
         status = plc.inputs(0, 8)
         assert status[3] == 101, f"trigger while BUSY: command status {status[3]}"
         assert plc.u32(status[6:8]) == part, "the refused trigger changed the part id"
+        # Scans done (the stand-in: halfway through its 300 ms) while still BUSY.
+        wait_for(lambda: plc.inputs(112, 1)[0] == 2, "scan phase 2")
+        assert plc.state() == BUSY, "scan phase 2 only came with DONE"
         wait_for(lambda: plc.state() == DONE, "DONE")
         regs = plc.inputs()
+        assert regs[112] == 2 and regs[114] == 0, f"scan phase {regs[112]}, reasons {regs[114]}"
+        assert abs(plc.u32(regs[115:117]) + regs[117] / 1000 - t_trigger) < 2, "result time"
+        revision = subprocess.run([BIN, "plc", "map", "--recipe", RECIPE], check=True,
+                                  capture_output=True, text=True).stdout
+        assert f"revision {regs[118]} " in revision, (regs[118], revision.splitlines()[0])
+        assert regs[119] == 0 and regs[120] == 65535, "the stand-in has no calibration"
         assert regs[5] == 1, f"sequence {regs[5]}"
         assert plc.u32(regs[6:8]) == part
         assert regs[8] == 1 and regs[9] == 0, "recipe slot / face echo"
@@ -201,11 +212,13 @@ def check_order(tmp, recipe, name, wordorder):
         got = features_of(regs, plc)
         nominal1 = round(recipe["features"][0]["nominal_mm"] * 1000)
         assert got[1][0] == nominal1 + 1000 and got[1][2] == 2, f"NOK feature {got[1]}"
+        assert regs[21] >> 8 == 4 and regs[114] == 4, "reasons: outside tolerance"
         assert regs[11] == 2 and regs[5] == 2, "overall NOK, sequence 2"
         plc.write(0, [ACK])
         regs = cycle(plc, 999998)
         got = features_of(regs, plc)
         assert got[3][0] == INVALID and math.isnan(got[3][1]) and got[3][2] == 3, got[3]
+        assert regs[33] >> 8 == 1 and regs[114] == 1, "reasons: not measured"
         assert regs[11] == 3, "overall not measured"
         plc.write(0, [ACK])
         regs = cycle(plc, 999996)
@@ -213,6 +226,7 @@ def check_order(tmp, recipe, name, wordorder):
         got = features_of(regs, plc)
         nominal4 = round(recipe["features"][3]["nominal_mm"] * 1000)
         assert got[4][0] == nominal4 + 1000 and got[4][2] == 4, f"degraded, not NOK: {got[4]}"
+        assert regs[39] >> 8 == 2 | 4 and regs[114] == 6, "reasons: degraded, outside tolerance"
         assert all(g[2] == 1 for s, g in got.items() if s <= 13 and s != 4)
         plc.write(0, [ACK])
 

@@ -7,8 +7,11 @@
 #include <fstream>
 #include <sstream>
 
+#include "../src/cell/device_watch.hpp"
+#include "../src/cell/plc_result.hpp"
 #include "hotgauge/cell/config.hpp"
 #include "hotgauge/cell/journal.hpp"
+#include "hotgauge/core/clock.hpp"
 #include "temp_dir.hpp"
 
 namespace hotgauge {
@@ -160,6 +163,100 @@ TEST(DaemonConfig, AMissingFileIsNamed) {
 }
 
 }  // namespace
+
+// ---- device health, calibration state, reason bits (docs/plc-modbus.md, map version 4) ----
+
+namespace {
+constexpr std::int64_t kS = 1'000'000'000;
+}
+
+TEST(DeviceWatch, AQuestionWithoutAnAnswerIsAFaultBeforeTheTransportGivesUp) {
+    cell::DeviceWatch w;
+    EXPECT_FALSE(w.status(cell::Device::kAxis, false, 0).configured);
+    EXPECT_FALSE(w.status(cell::Device::kCamera, true, 0).ok);  // never asked: not known well
+    w.probe_done(cell::Device::kCamera, true, "answering", 1 * kS);
+    EXPECT_TRUE(w.status(cell::Device::kCamera, true, 1 * kS).ok);
+    w.probe_started(cell::Device::kCamera, 2 * kS);
+    // Pending, but not yet for longer than a healthy device takes: the last answer stands.
+    EXPECT_TRUE(w.status(cell::Device::kCamera, true, 2 * kS + cell::DeviceWatch::kNoAnswerNs).ok);
+    const auto late = w.status(cell::Device::kCamera, true, 3 * kS);
+    EXPECT_FALSE(late.ok);
+    EXPECT_EQ(late.detail, "no answer for 1000 ms");
+    w.probe_done(cell::Device::kCamera, false, "lost", 4 * kS);
+    EXPECT_EQ(w.status(cell::Device::kCamera, true, 4 * kS).detail, "lost");
+    cell::DeviceHealth h;
+    h[cell::Device::kCamera] = w.status(cell::Device::kCamera, true, 4 * kS);
+    h[cell::Device::kResultsDisk] = {true, false, "full"};
+    h[cell::Device::kPyrometer] = {false, false, "not configured"};  // never a fault
+    EXPECT_EQ(h.fault_bits(), 0b10001);
+}
+
+TEST(DeviceWatch, TheResultsDiskNeedsItsFolderWritableAndFreeSpace) {
+    test::TempDir dir;
+    EXPECT_TRUE(cell::disk_status(dir.path, 1, "").ok);
+    EXPECT_FALSE(cell::disk_status(dir.path / "gone", 1, "").ok);
+    const auto full = cell::disk_status(dir.path, 1'000'000'000, "");  // a petabyte
+    EXPECT_FALSE(full.ok);
+    EXPECT_NE(full.detail.find("below 1000000000 MB"), std::string::npos) << full.detail;
+    const auto failed = cell::disk_status(dir.path, 1, "No space left on device");
+    EXPECT_FALSE(failed.ok);
+    EXPECT_NE(failed.detail.find("No space left"), std::string::npos);
+}
+
+TEST(CalibrationStatus, ValidDueNotMeasuredAndUnknown) {
+    const auto at = core::parse_iso8601_utc("2026-06-01T12:00:00Z");
+    ASSERT_TRUE(at);
+    EXPECT_EQ(core::iso8601_utc(*at), "2026-06-01T12:00:00Z");  // the writer's reverse
+    EXPECT_FALSE(core::parse_iso8601_utc("2026-13-01T00:00:00Z"));
+    EXPECT_FALSE(core::parse_iso8601_utc("yesterday"));
+    const std::int64_t day = 86'400 * kS;
+    auto s = cell::calibration_status("2026-06-01T12:00:00Z", true, 180, *at + 10 * day + 5);
+    EXPECT_EQ(s.calibration, plc::CalibrationState::kValid);
+    EXPECT_EQ(s.calibration_age_days, 10);
+    s = cell::calibration_status("2026-06-01T12:00:00Z", true, 180, *at + 181 * day);
+    EXPECT_EQ(s.calibration, plc::CalibrationState::kDue);
+    s = cell::calibration_status("2026-06-01T12:00:00Z", false, 180, *at + day);
+    EXPECT_EQ(s.calibration, plc::CalibrationState::kNotMeasured);
+    s = cell::calibration_status("", true, 180, *at);
+    EXPECT_EQ(s.calibration, plc::CalibrationState::kUnknown);
+    EXPECT_FALSE(s.calibration_age_days);
+}
+
+TEST(ReasonBits, FromWhatTheMeasurementRecorded) {
+    measure::FeatureResult f;
+    f.name = "Diameter 1";
+    f.tol_lower_mm = -0.1;
+    f.tol_upper_mm = 0.1;
+    f.verdict = measure::Verdict::kOk;
+    f.hot_mm = 139.0;
+    f.cold_mm = 138.0;
+    f.deviation_mm = 0.05;
+    EXPECT_EQ(cell::feature_reasons(f, nullptr), 0);
+    f.low_coverage = true;
+    EXPECT_EQ(cell::feature_reasons(f, nullptr), plc::reason::kLowCoverage);
+    f.low_coverage = false;
+    f.deviation_mm = 0.2;  // degraded and outside: both said
+    f.verdict = measure::Verdict::kDegraded;
+    EXPECT_EQ(cell::feature_reasons(f, nullptr),
+              plc::reason::kDegraded | plc::reason::kOutsideTolerance);
+    f.cold_mm.reset();  // no temperature: a hot value only
+    f.deviation_mm.reset();
+    f.verdict = measure::Verdict::kNotMeasured;
+    EXPECT_EQ(cell::feature_reasons(f, nullptr),
+              plc::reason::kNotMeasured | plc::reason::kTemperatureUnknown);
+    f.hot_mm.reset();
+    f.face_missing = true;
+    EXPECT_EQ(cell::feature_reasons(f, nullptr),
+              plc::reason::kNotMeasured | plc::reason::kFaceMissing);
+    pipeline::Verification check;
+    check.features.push_back({});
+    check.features.back().name = "Diameter 1";
+    EXPECT_EQ(cell::feature_reasons(f, &check) & plc::reason::kMasterCheckFailed,
+              plc::reason::kMasterCheckFailed);
+    check.features.back().passed = true;
+    EXPECT_EQ(cell::feature_reasons(f, &check) & plc::reason::kMasterCheckFailed, 0);
+}
+
 }  // namespace hotgauge
 
 // The journal's VERDICT field is what docs/operations.md tells a QE to filter on

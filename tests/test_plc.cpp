@@ -83,6 +83,8 @@ std::uint16_t u16(State s) { return static_cast<std::uint16_t>(s); }
 std::uint16_t u16(ErrorCode e) { return static_cast<std::uint16_t>(e); }
 std::uint16_t u16(Command c) { return static_cast<std::uint16_t>(c); }
 std::uint16_t u16(DriftState d) { return static_cast<std::uint16_t>(d); }
+std::uint16_t u16(ScanPhase p) { return static_cast<std::uint16_t>(p); }
+std::uint16_t u16(CalibrationState c) { return static_cast<std::uint16_t>(c); }
 
 // ---- register encoding: the worked examples of docs/plc-modbus.md ---------------------------
 
@@ -166,14 +168,14 @@ TEST(RegisterMap, DocsContainTheGeneratedTables) {
             << table;
         from = to + 2;
     }
-    EXPECT_EQ(n, 3);
+    EXPECT_EQ(n, 4);
 }
 
 TEST(RegisterMap, LayoutFitsOneReadAndTheMirror) {
-    EXPECT_EQ(ir::kCount, 112);
+    EXPECT_EQ(ir::kCount, 123);
     EXPECT_LE(ir::kCount, MODBUS_MAX_READ_REGISTERS);  // the whole map in one request
     EXPECT_EQ(ir::feature(1), 16);
-    EXPECT_EQ(ir::feature(16) + ir::kFeatureStride, ir::kCount);
+    EXPECT_EQ(ir::feature(16) + ir::kFeatureStride, ir::kScanPhase);  // v3's addresses kept
     EXPECT_GT(hr::kMirrorBase, hr::kWritableCount);
 }
 
@@ -865,14 +867,15 @@ TEST(BadInput, AddressesOutsideTheMapGetException02LoggedOncePerClient) {
     std::vector<std::uint16_t> buf(ir::kCount);
     const auto illegal_address = [&](int rc) { return rc == -1 && errno == EMBXILADD; };
     for (int i = 0; i < 20; ++i) {
-        EXPECT_TRUE(illegal_address(modbus_read_input_registers(m.ctx(), 100, 20, buf.data())));
+        EXPECT_TRUE(illegal_address(modbus_read_input_registers(m.ctx(), 110, 20, buf.data())));
     }
     EXPECT_TRUE(illegal_address(modbus_read_input_registers(m.ctx(), ir::kCount, 1, buf.data())));
     EXPECT_TRUE(illegal_address(modbus_read_registers(m.ctx(), hr::kWritableCount, 1, buf.data())));
     EXPECT_TRUE(illegal_address(modbus_read_registers(m.ctx(), 0, hr::kWritableCount + 1,
                                                       buf.data())));  // spans the gap
-    EXPECT_TRUE(illegal_address(modbus_read_registers(m.ctx(), hr::kMirrorBase + 100, 13,
-                                                      buf.data())));  // runs past the mirror
+    EXPECT_TRUE(
+        illegal_address(modbus_read_registers(m.ctx(), hr::kMirrorBase + ir::kCount - 12, 13,
+                                              buf.data())));  // runs past the mirror
     EXPECT_TRUE(illegal_address(modbus_write_register(m.ctx(), hr::kMirrorBase, 1)));
     EXPECT_TRUE(illegal_address(modbus_write_register(m.ctx(), hr::kWritableCount, 1)));
     const std::uint16_t two[2] = {0, 0};
@@ -1254,7 +1257,7 @@ TEST(Handshake, DieIdAndDriftRegisters) {
     r.features[3].drift = DriftState::kDown;
     ASSERT_TRUE(h.finish(e->trigger.trigger_id, r));
     const auto& in = h.inputs();
-    EXPECT_EQ(in[ir::kMapVersionReg], 3);
+    EXPECT_EQ(in[ir::kMapVersionReg], 4);
     EXPECT_EQ(in[ir::kDriftCount], 2);
     EXPECT_EQ(in[ir::feature(1) + ir::kDrift], u16(DriftState::kWatching));
     EXPECT_EQ(in[ir::feature(2) + ir::kDrift], u16(DriftState::kUp));
@@ -1264,4 +1267,79 @@ TEST(Handshake, DieIdAndDriftRegisters) {
     command(h, u16(Command::kAck));
     EXPECT_EQ(h.inputs()[ir::kDriftCount], 0);
     EXPECT_EQ(h.inputs()[ir::feature(2) + ir::kDrift], 0);
+}
+
+// Map version 4: the scan phase (the part may move before the result), the live cell status in
+// every state, and the result's reason bits, time and recipe revision, cleared with the result.
+TEST(Handshake, ScanPhaseFollowsTheCycle) {
+    Handshake h;
+    EXPECT_EQ(h.inputs()[ir::kScanPhase], u16(ScanPhase::kNone));
+    const auto e = h.write(0, trigger_write(5, 1, 0));
+    ASSERT_TRUE(e);
+    EXPECT_EQ(h.inputs()[ir::kScanPhase], u16(ScanPhase::kScanning));
+    h.scans_done(e->trigger.trigger_id + 1);  // another cycle's: ignored
+    EXPECT_EQ(h.inputs()[ir::kScanPhase], u16(ScanPhase::kScanning));
+    h.scans_done(e->trigger.trigger_id);
+    EXPECT_EQ(h.inputs()[ir::kScanPhase], u16(ScanPhase::kScansDone));
+    EXPECT_EQ(h.state(), State::kBusy);
+    ASSERT_TRUE(h.finish(e->trigger.trigger_id, derived_result(5, 4)));
+    EXPECT_EQ(h.inputs()[ir::kScanPhase], u16(ScanPhase::kScansDone));
+    command(h, u16(Command::kAck));
+    EXPECT_EQ(h.inputs()[ir::kScanPhase], u16(ScanPhase::kNone));
+    h.scans_done(e->trigger.trigger_id);  // late: the cycle is over
+    EXPECT_EQ(h.inputs()[ir::kScanPhase], u16(ScanPhase::kNone));
+    const auto f = h.write(0, trigger_write(6, 1, 0));
+    ASSERT_TRUE(f);
+    h.fault(u16(ErrorCode::kDeviceLost));
+    EXPECT_EQ(h.inputs()[ir::kScanPhase], u16(ScanPhase::kNone));
+}
+
+TEST(Handshake, ReasonsTimeAndRevisionComeAndGoWithTheResult) {
+    Handshake h;
+    const auto e = h.write(0, trigger_write(5, 1, 0));
+    ASSERT_TRUE(e);
+    PartResult r = derived_result(5, 3);
+    r.features[1].reasons = reason::kDegraded | reason::kOutsideTolerance;
+    r.features[2].reasons = reason::kLowCoverage;
+    r.features[1].drift = DriftState::kUp;
+    r.reasons = reason::kNotCompensated;
+    r.time_ns = 1'796'000'000'123'456'789;  // 2026-11-29T..., .123 s
+    r.recipe_revision = 62768;
+    ASSERT_TRUE(h.finish(e->trigger.trigger_id, r));
+    const auto& in = h.inputs();
+    EXPECT_EQ(in[ir::feature(1) + ir::kDrift], 0);
+    EXPECT_EQ(in[ir::feature(2) + ir::kDrift], u16(DriftState::kUp) | (0x06 << 8));
+    EXPECT_EQ(in[ir::feature(3) + ir::kDrift], 0x08 << 8);
+    EXPECT_EQ(in[ir::kReasons], reason::kNotCompensated | reason::kDegraded |
+                                    reason::kOutsideTolerance | reason::kLowCoverage);
+    EXPECT_EQ(decode_u32(in[ir::kResultTime], in[ir::kResultTime + 1], WordOrder::kBigEndian),
+              1'796'000'000u);
+    EXPECT_EQ(in[ir::kResultTimeMs], 123);
+    EXPECT_EQ(in[ir::kRecipeRevision], 62768);
+    command(h, u16(Command::kAck));
+    for (auto a : {ir::kReasons, ir::kResultTime, ir::kResultTimeMs, ir::kRecipeRevision})
+        EXPECT_EQ(h.inputs()[a], 0) << a;
+    EXPECT_EQ(h.inputs()[ir::feature(2) + ir::kDrift], 0);
+}
+
+TEST(Handshake, CellStatusIsLiveInEveryState) {
+    Handshake h;
+    EXPECT_EQ(h.inputs()[ir::kCalibrationAge], 0xFFFF);  // unknown until told
+    CellStatus s;
+    s.device_faults = 0b10001;  // camera and results disk
+    s.calibration = CalibrationState::kDue;
+    s.calibration_age_days = 200;
+    s.expected_scan_s = 9.8765;
+    s.expected_cycle_s = 100.0;  // beyond 65.535 s: saturates
+    h.set_cell_status(s);
+    h.fault(u16(ErrorCode::kDeviceLost));  // FAULT clears the result, not the status
+    const auto& in = h.inputs();
+    EXPECT_EQ(in[ir::kDeviceHealth], 0b10001);
+    EXPECT_EQ(in[ir::kCalibrationState], u16(CalibrationState::kDue));
+    EXPECT_EQ(in[ir::kCalibrationAge], 200);
+    EXPECT_EQ(in[ir::kExpectedScanMs], 9877);
+    EXPECT_EQ(in[ir::kExpectedCycleMs], 65535);
+    h.set_cell_status({});
+    EXPECT_EQ(in[ir::kExpectedScanMs], 0);  // not known
+    EXPECT_EQ(in[ir::kCalibrationAge], 0xFFFF);
 }

@@ -55,6 +55,10 @@ TRIGGER, ACK, RESET = 1, 2, 3
 VERDICTS = {0: "none", 1: "OK", 2: "NOK", 3: "NOT_MEASURED", 4: "DEGRADED"}
 INVALID_UM = -0x80000000
 WATCHDOG_S = 2
+N_INPUTS = 123  # map version 4
+# Reason bits (docs/plc-modbus.md "Reason bits").
+NOT_MEASURED, DEGRADED_BIT, OUTSIDE, LOW_COVERAGE, NO_TEMPERATURE, FACE_MISSING = 1, 2, 4, 8, 16, 32
+NOT_COMPENSATED, CHECK_FAILED = 64, 128
 # The axis controller's conveyor registers (docs/virtual-cell.md).
 CONVEYOR_REQUEST, CONVEYOR_LOADED = 6, 7
 
@@ -172,7 +176,7 @@ class Plc:
         self.client.close()
 
     def inputs(self):
-        rr = self.client.read_input_registers(0, 112, slave=UNIT)
+        rr = self.client.read_input_registers(0, N_INPUTS, slave=UNIT)
         if rr.isError():
             raise RuntimeError(f"PLC: read input registers: {rr}")
         return rr.registers
@@ -212,14 +216,57 @@ def decode(r):
            "part_id": dec(6).decode_32bit_uint(), "verdict": VERDICTS.get(r[11], str(r[11])),
            "n_features": r[12],
            "temperature_c": None if r[13] == 0x8000 else (r[13] - (r[13] >> 15 << 16)) / 10,
-           "features": {}}
+           "map_version": r[14], "phase": r[112], "health": r[113], "reasons": r[114],
+           "time_s": dec(115).decode_32bit_uint(), "time_ms": r[117], "recipe_revision": r[118],
+           "calibration": r[119], "calibration_age_days": r[120], "expected_scan_ms": r[121],
+           "expected_cycle_ms": r[122], "features": {}}
     for slot in range(1, r[12] + 1):
         a = 16 + 6 * (slot - 1)
         um = dec(a).decode_32bit_int()
         out["features"][slot] = {"um": None if um == INVALID_UM else um,
                                  "mm": dec(a + 2).decode_32bit_float(),
-                                 "verdict": VERDICTS.get(r[a + 4], str(r[a + 4]))}
+                                 "verdict": VERDICTS.get(r[a + 4], str(r[a + 4])),
+                                 "drift": r[a + 5] & 0xFF, "reasons": r[a + 5] >> 8}
     return out
+
+
+def json_reasons(f):
+    """A results-file feature's reason bits, as docs/plc-modbus.md defines them."""
+    bits = 0
+    if f["cold_mm"] is None or f["verdict"] == "NOT_MEASURED":
+        bits |= NOT_MEASURED
+    if f["verdict"] == "DEGRADED":
+        bits |= DEGRADED_BIT
+    dev, (lo, hi) = f["deviation_mm"], f["tolerance_mm"]
+    if dev is not None and (dev < lo or dev > hi):
+        bits |= OUTSIDE
+    if f.get("low_coverage"):
+        bits |= LOW_COVERAGE
+    if f["hot_mm"] is not None and f["cold_mm"] is None:
+        bits |= NO_TEMPERATURE
+    if f.get("face_missing"):
+        bits |= FACE_MISSING
+    return bits
+
+
+def check_reasons(p, line):
+    """The PLC's reason bits of a DONE part `p` against its results-file line: per feature, and
+    the part's register holding at least their OR. Returns the part register's value."""
+    by_slot = {f["slot"]: f for f in line["part"]["features"]}
+    off_certificate = {f["name"] for f in line.get("verification", {}).get("features", [])
+                       if not f["passed"]}
+    union = 0
+    for slot, got in p["features"].items():
+        want = json_reasons(by_slot[slot])
+        if by_slot[slot]["name"] in off_certificate:
+            want |= CHECK_FAILED
+        assert got["reasons"] == want, \
+            f"seq {line['sequence']} slot {slot}: PLC reasons {got['reasons']:#x}, JSON says {want:#x}"
+        union |= want
+    assert p["reasons"] & union == union, f"part reasons {p['reasons']:#x} lack {union:#x}"
+    assert p["time_s"] == line["time_ns"] // 10**9 and p["time_ms"] == line["time_ns"] // 10**6 % 1000, \
+        (p["time_s"], p["time_ms"], line["time_ns"])
+    return p["reasons"]
 
 
 class Conveyor:
@@ -412,8 +459,21 @@ def run_part(plc, conveyor, n, part_id, timeout=90, slot=1):
     plc.to_idle()
     t0 = time.monotonic()
     plc.trigger(part_id, slot=slot)
-    r = plc.wait_state({DONE, FAULT}, timeout)
+    # Polled fast, to time the scan phase: the wall clock of the first read that saw 2.
+    scans_done_ns, deadline = None, t0 + timeout
+    while True:
+        r = plc.inputs()
+        if scans_done_ns is None and r[112] == 2:
+            scans_done_ns = time.time_ns()
+            scans_done_state = r[1]
+        if r[1] in (DONE, FAULT):
+            break
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"part {n}: no DONE or FAULT within {timeout} s")
+        time.sleep(0.005)
     out = decode(r)
+    out["scans_done_ns"] = scans_done_ns
+    out["scans_done_state"] = scans_done_state if scans_done_ns else None
     out["cycle_s"] = time.monotonic() - t0
     out["part"] = n
     out["slot"] = slot
@@ -499,6 +559,55 @@ def check_results_files(results_dir, parts):
             assert j.get(key), f"sequence {j['sequence']}: no {key}"
         assert j["part"]["stage_ms"], "no stage timings"
     return csvs, jsonls, seqs, lines
+
+
+def last_profile_ns(recording):
+    """The newest profile time of an archived recording (recording-format-v1), ns."""
+    import numpy as np
+    faces = [d for d in glob.glob(os.path.join(recording, "*", "profile_times.npy"))]
+    assert faces, f"{recording}: no face with profile_times.npy"
+    return max(int(np.load(f)[-1]) for f in faces)
+
+
+def check_plc_status(bin_dir, parts, lines, calibrated):
+    """Map version 4 against the results files: the scan phase before DONE and within 0.1 s of
+    the last profile (when the recording was archived), the reason bits and the result time of
+    every part, the recipe revision, the device health, the calibration and the expected times
+    (docs/plc-modbus.md). Returns the scan-phase delays, s."""
+    out = subprocess.run([os.path.join(bin_dir, "src/app/hotgauge"), "plc", "map", "--recipe",
+                          os.path.join(REPO, "config/parts/hub-a.yaml")],
+                         check=True, capture_output=True, text=True).stdout
+    revision = int(re.search(r"revision (\d+)", out).group(1))
+    delays = []
+    for i, (p, j) in enumerate(zip(parts, lines)):
+        if p["state"] != DONE:
+            continue
+        assert p["map_version"] == 4, p["map_version"]
+        assert p["scans_done_ns"] and p["scans_done_state"] == BUSY, \
+            f"part {p['part_id']}: scan phase 2 not seen before DONE"
+        reasons = check_reasons(p, j)
+        # An OK part can only have been seen on less arc (information, not a fault).
+        assert p["slot"] != 1 or reasons & ~LOW_COVERAGE == 0 or p["verdict"] != "OK", \
+            (reasons, p["verdict"])
+        if p["slot"] == 1:
+            assert p["recipe_revision"] == revision, (p["recipe_revision"], revision)
+        assert p["health"] == 0, f"part {p['part_id']}: device health {p['health']:#x}"
+        assert p["calibration"] == (1 if calibrated else 3) and \
+            (p["calibration_age_days"] == 0 or not calibrated), \
+            (p["calibration"], p["calibration_age_days"])
+        if i > 0:
+            earlier = sorted(q["cycle_s"] for q in parts[:i])
+            median = earlier[len(earlier) // 2]
+            # Medians of the cycles so far (the scan's includes this part's own).
+            assert 0.3 * median < p["expected_cycle_ms"] / 1000 < 3 * median, \
+                (p["expected_cycle_ms"], earlier)
+            assert 0 < p["expected_scan_ms"] / 1000 < 3 * median, (p["expected_scan_ms"], earlier)
+        if j.get("archived_as"):
+            delays.append((p["scans_done_ns"] - last_profile_ns(j["archived_as"])) / 1e9)
+    # Against the profile's timestamp (the camera's, through the calibrated clock offset) the
+    # PLC's poll can read a millisecond or two early; never 20 ms.
+    assert all(-0.02 < d <= 0.1 for d in delays), f"scan phase 2 after the last profile: {delays} s"
+    return delays
 
 
 def check_masters(results_dir, parts, lines):
@@ -704,6 +813,10 @@ def main():
         print("\n" + text)
         csvs, jsonls, seqs, lines = check_results_files(line.results_dir, parts)
         master_worst = check_masters(line.results_dir, parts, lines) if line.masters else None
+        delays = check_plc_status(a.bin_dir, parts, lines, calibrated=bool(cal))
+        if delays:
+            print(f"PLC scan phase 2 ('part may move'): {min(delays) * 1e3:.1f} to "
+                  f"{max(delays) * 1e3:.1f} ms after the last profile, before DONE in every part")
         print(f"\nworst |measured - truth| over all features and parts: {worst:.4f} mm")
         if cal:
             found, missing, total, before = measure_archived(line, produced, NOMINAL)

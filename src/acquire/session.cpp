@@ -98,6 +98,15 @@ core::Result<void> CameraSession::connect() {
     return {};
 }
 
+core::Result<void> CameraSession::check() {
+    if (camera_ && camera_->in_control()) return {};
+    if (camera_) lose("lost between scans: no answer to a register read");
+    if (const auto wait = backoff_remaining(); wait.count() > 0)
+        return core::make_error(last_failure_ + "; next attempt in " +
+                                std::to_string(wait.count()) + " ms");
+    return connect();
+}
+
 core::Result<ScanOutcome> CameraSession::scan(double seconds, std::optional<double> temperature_c,
                                               const std::function<void()>& on_started) {
     if (auto ok = connect(); !ok) return ok.error();

@@ -16,7 +16,9 @@
 #include <thread>
 
 #include "commands.hpp"
+#include "hotgauge/cell/config.hpp"
 #include "hotgauge/cell/plc_sections.hpp"
+#include "hotgauge/core/clock.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/io/yaml_reader.hpp"
 #include "hotgauge/plc/pyrometer.hpp"
@@ -77,8 +79,10 @@ struct ServeArgs {
 
 // The stand-in cell's result: every recipe feature at nominal + ((part id + slot) mod 5 − 2)·10 µm
 // (always in tolerance), at 1050.0 °C, unless the part id asks for trouble.
-plc::PartResult demo_result(const core::Recipe& recipe, std::uint32_t part_id) {
+plc::PartResult demo_result(const core::Recipe& recipe, std::uint32_t part_id,
+                            std::uint16_t recipe_revision) {
     plc::PartResult r;
+    r.recipe_revision = recipe_revision;
     r.temperature_c = 1050.0;
     for (const auto& f : recipe.features) {
         plc::FeatureValue v;
@@ -90,18 +94,22 @@ plc::PartResult demo_result(const core::Recipe& recipe, std::uint32_t part_id) {
         if ((part_id == kNokPart && f.slot == 1) || (part_id == kDegradedPart && f.slot == 4))
             value = f.nominal_mm + 1.0;
         if (part_id != kNotMeasuredPart || f.slot != 3) v.value_mm = value;
-        if (!v.value_mm)
+        const bool outside = value - f.nominal_mm < f.tol_lower_mm - 1e-9 ||
+                             value - f.nominal_mm > f.tol_upper_mm + 1e-9;
+        if (v.value_mm && outside) v.reasons |= plc::reason::kOutsideTolerance;
+        if (!v.value_mm) {
             v.verdict = plc::Verdict::kNotMeasured;
-        else if (part_id == kDegradedPart && f.slot == 4)  // out of tolerance, but degraded
+            v.reasons = plc::reason::kNotMeasured;
+        } else if (part_id == kDegradedPart && f.slot == 4) {  // out of tolerance, but degraded
             v.verdict = plc::Verdict::kDegraded;
-        else if (value - f.nominal_mm < f.tol_lower_mm - 1e-9 ||
-                 value - f.nominal_mm > f.tol_upper_mm + 1e-9)
-            v.verdict = plc::Verdict::kNok;
-        else
-            v.verdict = plc::Verdict::kOk;
+            v.reasons |= plc::reason::kDegraded;
+        } else {
+            v.verdict = outside ? plc::Verdict::kNok : plc::Verdict::kOk;
+        }
         r.features.push_back(v);
     }
     r.overall = plc::overall_verdict(r.features, false);
+    r.time_ns = core::realtime_ns();
     return r;
 }
 
@@ -152,11 +160,14 @@ int serve(const ServeArgs& a) {
     std::fflush(stdout);
 
     std::optional<plc::TriggerRequest> pending;
-    Clock::time_point due;
+    Clock::time_point due, scanned;  // the stand-in's scans take half its time
+    bool scans_reported = false;
+    const std::uint16_t revision = cell::recipe_revision(a.recipe);
     const auto end = Clock::now() + std::chrono::duration<double>(a.duration_s);
     while (!g_stop && (a.duration_s <= 0 || Clock::now() < end)) {
+        const auto next = scans_reported ? due : scanned;  // the stand-in's next step
         const auto wait = pending ? std::chrono::ceil<std::chrono::milliseconds>(
-                                        std::max(due - Clock::now(), Clock::duration{}))
+                                        std::max(next - Clock::now(), Clock::duration{}))
                                   : std::chrono::milliseconds(100);
         if (auto e = s.wait_event(std::min(wait, std::chrono::milliseconds(100)))) {
             if (e->kind == plc::PlcEvent::Kind::kReset) {
@@ -166,13 +177,19 @@ int serve(const ServeArgs& a) {
             } else {
                 pending = e->trigger;
                 due = Clock::now() + std::chrono::milliseconds(a.busy_ms);
+                scanned = Clock::now() + std::chrono::milliseconds(a.busy_ms / 2);
+                scans_reported = false;
             }
+        }
+        if (pending && !scans_reported && Clock::now() >= scanned) {
+            s.scans_done(pending->trigger_id);
+            scans_reported = true;
         }
         if (pending && Clock::now() >= due) {
             if (pending->part_id == kFaultPart)
                 s.fault(static_cast<std::uint16_t>(plc::ErrorCode::kMeasurementFailed));
-            else if (auto ok =
-                         s.finish(pending->trigger_id, demo_result(*recipe, pending->part_id));
+            else if (auto ok = s.finish(pending->trigger_id,
+                                        demo_result(*recipe, pending->part_id, revision));
                      ok)
                 spdlog::info("part {}: DONE", pending->part_id);
             pending.reset();
@@ -267,6 +284,39 @@ int pyrometer_sim(const PyroArgs& a) {
     return 0;
 }
 
+// ---- plc map ---------------------------------------------------------------------------------
+
+int print_map() {
+    std::fputs(plc::map_markdown().c_str(), stdout);
+    return 0;
+}
+
+// Which feature of the recipe is in which slot, where its registers are, what it is judged
+// against, and the revision the PLC reads at input 118 with every result of it.
+int print_recipe_map(const std::string& file) {
+    auto recipe = io::read_recipe(file);
+    if (!recipe) {
+        spdlog::error("{}", recipe.error().message);
+        return 1;
+    }
+    std::printf("Recipe %s (%s): revision %u (input 118 of its results)\n\n", recipe->name.c_str(),
+                file.c_str(), static_cast<unsigned>(cell::recipe_revision(file)));
+    std::printf(
+        "| Slot | Feature | Input (0-based): µm / mm / verdict / drift and reasons | 3xxxx first | "
+        "Nominal mm | Lower limit mm | Upper limit mm |\n| --- | --- | --- | --- | --- | --- | --- "
+        "|\n");
+    auto features = recipe->features;
+    std::sort(features.begin(), features.end(),
+              [](const auto& a, const auto& b) { return a.slot < b.slot; });
+    for (const auto& f : features) {
+        const unsigned a = plc::ir::feature(f.slot);
+        std::printf("| %d | %s | %u–%u / %u–%u / %u / %u | %u | %.3f | %.3f | %.3f |\n", f.slot,
+                    f.name.c_str(), a, a + 1, a + 2, a + 3, a + 4, a + 5, 30001u + a, f.nominal_mm,
+                    f.nominal_mm + f.tol_lower_mm, f.nominal_mm + f.tol_upper_mm);
+    }
+    return 0;
+}
+
 }  // namespace
 
 Command add_plc(CLI::App& app) {
@@ -293,6 +343,9 @@ Command add_plc(CLI::App& app) {
         ->capture_default_str();
 
     auto* m = plc->add_subcommand("map", "print the register map tables (as in the docs)");
+    auto map_recipe = std::make_shared<std::string>();
+    m->add_option("--recipe", *map_recipe,
+                  "print instead which feature of this recipe is in which slot, and its revision");
 
     auto pa = std::make_shared<PyroArgs>();
     auto* p = plc->add_subcommand("pyrometer", "read the pyrometer (Modbus RTU) and print");
@@ -313,10 +366,7 @@ Command add_plc(CLI::App& app) {
 
     return [=] {
         if (s->parsed()) return serve(*sa);
-        if (m->parsed()) {
-            std::fputs(plc::map_markdown().c_str(), stdout);
-            return 0;
-        }
+        if (m->parsed()) return map_recipe->empty() ? print_map() : print_recipe_map(*map_recipe);
         if (p->parsed()) return pyrometer(*pa);
         if (ps->parsed()) return pyrometer_sim(*pa);
         return 2;

@@ -53,11 +53,9 @@ core::Result<void> ModbusAxis::connect() {
     return {};
 }
 
-core::Result<bool> ModbusAxis::move_to(int position) {
-    timed_out_ = false;
+core::Result<void> ModbusAxis::read_status(std::uint16_t (&regs)[4]) {
     const bool reused = ctx_ != nullptr;
     if (auto ok = connect(); !ok) return ok.error();
-    std::uint16_t regs[4] = {};
     if (modbus_read_registers(as_ctx(ctx_), kTarget, 4, regs) != 4) {
         // A connection kept from the last move may have died with a restarted controller:
         // one fresh connection before giving up.
@@ -68,6 +66,18 @@ core::Result<bool> ModbusAxis::move_to(int position) {
         if (modbus_read_registers(as_ctx(ctx_), kTarget, 4, regs) != 4)
             return fail(std::string("read: ") + modbus_strerror(errno));
     }
+    return {};
+}
+
+core::Result<void> ModbusAxis::check() {
+    std::uint16_t regs[4] = {};
+    return read_status(regs);
+}
+
+core::Result<bool> ModbusAxis::move_to(int position) {
+    timed_out_ = false;
+    std::uint16_t regs[4] = {};
+    if (auto ok = read_status(regs); !ok) return ok.error();
     modbus_t* ctx = as_ctx(ctx_);
     if (regs[kCurrent] == position && regs[kState] == kInPosition) return false;
     const std::uint16_t cmd[2] = {static_cast<std::uint16_t>(position), kMove};

@@ -29,6 +29,14 @@ std::string file_hash(const fs::path& file) {
 
 }  // namespace
 
+std::uint16_t recipe_revision(const fs::path& recipe_file) {
+    std::ifstream in(recipe_file, std::ios::binary);
+    const std::string bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+    const std::uint64_t h =
+        io::fnv1a64(reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size());
+    return static_cast<std::uint16_t>(h ^ (h >> 16) ^ (h >> 32) ^ (h >> 48));
+}
+
 std::string files_hash(const std::vector<fs::path>& files, const std::string& extra) {
     std::string bytes;
     for (const auto& file : files) {
@@ -191,8 +199,8 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
     return y.guarded<DaemonConfig>([&] {
         const YAML::Node root = y.load();
         y.expect_map(root, "hotgauged",
-                     {"calibration", "faces", "recipes", "models", "masters", "camera",
-                      "accelerometer", "axis", "plc", "pyrometer", "results",
+                     {"calibration", "calibration_interval_days", "faces", "recipes", "models",
+                      "masters", "camera", "accelerometer", "axis", "plc", "pyrometer", "results",
                       "cell"});  // cell: moved to the calibration, refused below by name
         DaemonConfig c;
         c.file = file;
@@ -204,6 +212,8 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
                    "calibration now: calibration: FILE (docs/calibration.md)");
         c.calibration_file =
             existing(y, y.require(root, "hotgauged", "calibration"), "calibration", base);
+        c.calibration_interval_days = integer_in(y, root, "hotgauged", "calibration_interval_days",
+                                                 1, 3650, c.calibration_interval_days);
 
         const YAML::Node recipes = y.require(root, "hotgauged", "recipes");
         if (!recipes.IsMap() || recipes.size() == 0)
@@ -301,7 +311,7 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
             const std::string w = "results";
             y.expect_map(r, w,
                          {"dir", "archive_dir", "archive_quota_gb", "archive_every_nth_ok", "sync",
-                          "drift_baseline", "lot_report", "lot_report_every_s"});
+                          "drift_baseline", "lot_report", "lot_report_every_s", "min_free_mb"});
             if (r["dir"]) c.results.dir = base / y.string(r["dir"], w + ".dir");
             if (r["archive_dir"])
                 c.archive.dir = base / y.string(r["archive_dir"], w + ".archive_dir");
@@ -321,6 +331,8 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
                 y.fail(r["drift_baseline"], w + ".drift_baseline: 0 (no drift watch) or at least " +
                                                 std::to_string(quality::kMinBaseline));
             c.quality.drift_baseline = static_cast<std::size_t>(baseline);
+            c.results_min_free_mb = integer_in(y, r, w, "min_free_mb", 0, 1'000'000,
+                                               static_cast<int>(c.results_min_free_mb));
         }
         return c;
     });

@@ -4,11 +4,13 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <deque>
 #include <mutex>
 #include <set>
 #include <sstream>
 #include <thread>
 
+#include "device_watch.hpp"
 #include "hotgauge/accel/ring.hpp"
 #include "hotgauge/accel/source.hpp"
 #include "hotgauge/cell/axis.hpp"
@@ -25,6 +27,7 @@
 #include "hotgauge/plc/server.hpp"
 #include "hotgauge/results/archive.hpp"
 #include "hotgauge/results/results_log.hpp"
+#include "plc_result.hpp"
 #include "queue.hpp"
 
 namespace hotgauge::cell {
@@ -74,64 +77,6 @@ std::vector<std::string> faces_to_scan(const Setup& s, const core::Recipe& recip
     for (const auto& name : s.config.faces)
         if (needed.count(name)) out.push_back(name);
     return out;
-}
-
-plc::Verdict to_plc(measure::Verdict v) {
-    switch (v) {
-        case measure::Verdict::kOk:
-            return plc::Verdict::kOk;
-        case measure::Verdict::kNok:
-            return plc::Verdict::kNok;
-        case measure::Verdict::kDegraded:
-            return plc::Verdict::kDegraded;
-        case measure::Verdict::kNotMeasured:
-            break;
-    }
-    return plc::Verdict::kNotMeasured;
-}
-
-// The measurement as the PLC sees it: the cold value of each feature (what the tolerance is on);
-// a master check's overall verdict is the check's (docs/verification.md).
-plc::PartResult to_plc(const pipeline::PartResult& r, const pipeline::Verification* check) {
-    plc::PartResult out;
-    out.temperature_c = r.measurement.temperature_c;
-    for (const auto& f : r.measurement.features) {
-        plc::FeatureValue v;
-        v.name = f.name;
-        v.slot = f.slot;
-        v.verdict = to_plc(f.verdict);
-        if (v.verdict != plc::Verdict::kNotMeasured) v.value_mm = f.cold_mm;
-        if (!v.value_mm) v.verdict = plc::Verdict::kNotMeasured;
-        out.features.push_back(v);
-    }
-    out.overall = plc::overall_verdict(out.features, r.degraded);
-    // A master: the check's verdict; inconclusive (failed only on degraded features) reads
-    // degraded; a passed check over slots not all OK reads as the slots do.
-    if (check && !check->passed)
-        out.overall = check->inconclusive ? plc::Verdict::kDegraded : plc::Verdict::kNok;
-    else if (check && out.overall != plc::Verdict::kNok)
-        out.overall =
-            std::all_of(out.features.begin(), out.features.end(),
-                        [](const plc::FeatureValue& v) { return v.verdict == plc::Verdict::kOk; })
-                ? plc::Verdict::kOk
-                : out.overall;
-    return out;
-}
-
-// The drift watch's state of each feature (results::ResultEntry::drift) into the registers.
-void set_drift(plc::PartResult& p, const std::vector<std::pair<std::string, std::string>>& drift) {
-    for (auto& v : p.features)
-        for (const auto& [name, state] : drift)
-            if (name == v.name)
-                v.drift = state == "DRIFT_UP"     ? plc::DriftState::kUp
-                          : state == "DRIFT_DOWN" ? plc::DriftState::kDown
-                          : state == "WATCHING"   ? plc::DriftState::kWatching
-                                                  : plc::DriftState::kNone;
-}
-
-std::string verdict_text(const pipeline::PartResult& r, const pipeline::Verification* check) {
-    const plc::PartResult p = to_plc(r, check);
-    return plc::to_string(p.overall);
 }
 
 }  // namespace
@@ -206,6 +151,8 @@ core::Result<std::shared_ptr<const Setup>> load_setup(const fs::path& config_fil
         s->masters.emplace(slot, std::move(*cert));
     }
     s->result_hash = result_hashes(*s);
+    for (const auto& [slot, file] : s->config.recipes)
+        s->recipe_revision[slot] = recipe_revision(file);
     auto tri = calib::triangulation(s->calibration.sensor);
     if (!tri)
         return core::make_error(s->config.calibration_file.string() + ": " + tri.error().message);
@@ -255,6 +202,7 @@ std::string describe(const Setup& s) {
 // One trigger on its way through the cell.
 struct Job {
     std::uint64_t sequence = 0;
+    Clock::time_point triggered;
     plc::TriggerRequest trigger;
     std::shared_ptr<const Setup> setup;
     const core::Recipe* recipe = nullptr;
@@ -282,6 +230,25 @@ struct Captured {
     std::vector<std::string> left_out;  // faces whose scans lost their start twice
 };
 
+// The last cycles' durations, for the PLC's expected times: their median.
+class CycleTimes {
+  public:
+    void add(Clock::duration d) {
+        if (seconds_.size() == kKept) seconds_.pop_front();
+        seconds_.push_back(std::chrono::duration<double>(d).count());
+    }
+    std::optional<double> median() const {
+        if (seconds_.empty()) return std::nullopt;
+        std::vector<double> v(seconds_.begin(), seconds_.end());
+        std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+        return v[v.size() / 2];
+    }
+
+  private:
+    static constexpr std::size_t kKept = 15;
+    std::deque<double> seconds_;
+};
+
 struct Daemon::Impl {
     std::shared_ptr<const Setup> setup;  // control thread; jobs carry their own
     Supervisor sup;
@@ -301,6 +268,10 @@ struct Daemon::Impl {
 
     mutable std::mutex stats_mutex;
     DaemonStats stats;
+    CycleTimes scan_times, cycle_times;  // trigger -> scans done / DONE; under stats_mutex
+    std::string store_error;             // the last failed append, "" after a good one; ditto
+    DeviceWatch devices;                 // the camera's and the axis's answers
+    Clock::time_point last_probe{};      // acquisition thread
 
     // Acquisition thread only.
     std::shared_ptr<const Setup> acq_setup;
@@ -327,6 +298,8 @@ struct Daemon::Impl {
     }
 
     void control_loop();
+    void update_health();
+    void probe_devices();
     void on_event(const plc::PlcEvent& ev);
     void apply_reload();
     bool healthy() const;
@@ -367,11 +340,54 @@ void Daemon::Impl::control_loop() {
         if (auto ev = server->wait_event(kLoopPeriod)) on_event(*ev);
         if (reload && in_flight == 0) apply_reload();
         if (healthy() && sup.watchdog) sup.watchdog();
+        update_health();
         if (in_flight == 0) {
             const auto st = server->state();
             set_state(st == plc::State::kFault ? "fault: waiting for the PLC's reset"
                                                : "idle: waiting for a trigger");
         }
+    }
+}
+
+// The devices' health into the PLC's registers and the stats, every control loop; a device that
+// changes between working and not is logged once each way.
+void Daemon::Impl::update_health() {
+    constexpr std::int64_t kAccelSilentNs = 500'000'000;
+    const Setup& s = *setup;
+    const std::int64_t now = core::realtime_ns();
+    DeviceHealth h;
+    h.updated_ns = now;
+    h[Device::kCamera] = devices.status(Device::kCamera, true, now);
+    h[Device::kAxis] = devices.status(Device::kAxis, s.config.axis.kind == "modbus", now);
+    h[Device::kAccelerometer] = ring ? accelerometer_status(*ring, now, kAccelSilentNs)
+                                     : DeviceStatus{false, false, "not configured"};
+    h[Device::kPyrometer] =
+        pyrometer ? pyrometer_status(*pyrometer) : DeviceStatus{false, false, "not configured"};
+    std::string last_store_error;
+    {
+        std::lock_guard lock(stats_mutex);
+        last_store_error = store_error;
+    }
+    h[Device::kResultsDisk] =
+        disk_status(s.config.results.dir, s.config.results_min_free_mb, last_store_error);
+    plc::CellStatus cs = calibration_status(s.calibration.calibrated_at, s.calibration.measured(),
+                                            s.config.calibration_interval_days, now);
+    cs.device_faults = h.fault_bits();
+    DeviceHealth before;
+    {
+        std::lock_guard lock(stats_mutex);
+        cs.expected_scan_s = scan_times.median();
+        cs.expected_cycle_s = cycle_times.median();
+        before = std::exchange(stats.health, h);
+    }
+    server->set_cell_status(cs);
+    for (int d = 0; d < kDeviceCount; ++d) {
+        const DeviceStatus &was = before.devices[d], &is = h.devices[d];
+        if (!is.configured || (before.updated_ns != 0 && was.ok == is.ok)) continue;
+        if (!is.ok)
+            spdlog::warn("device health: {} NOT working: {}", to_string(Device(d)), is.detail);
+        else if (before.updated_ns != 0)
+            spdlog::info("device health: {} working again: {}", to_string(Device(d)), is.detail);
     }
 }
 
@@ -403,6 +419,7 @@ void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
     Job job;
     job.trigger = t;
     job.setup = setup;
+    job.triggered = Clock::now();
     {
         std::lock_guard lock(stats_mutex);
         job.sequence = stats.next_sequence++;
@@ -505,11 +522,31 @@ void Daemon::Impl::await_accel_history(double margin_s) const {
     }
 }
 
+// Between parts: the camera and the axis asked whether they are there, every half second, so
+// that one lost while idle shows in the health register long before the next trigger.
+void Daemon::Impl::probe_devices() {
+    constexpr milliseconds kProbePeriod{500};
+    if (Clock::now() - last_probe < kProbePeriod) return;
+    last_probe = Clock::now();
+    devices.probe_started(Device::kCamera, core::realtime_ns());
+    const auto cam = session->check();
+    devices.probe_done(Device::kCamera, static_cast<bool>(cam),
+                       cam ? "answering" : cam.error().message, core::realtime_ns());
+    if (!axis) return;
+    devices.probe_started(Device::kAxis, core::realtime_ns());
+    const auto ax = axis->check();
+    devices.probe_done(Device::kAxis, static_cast<bool>(ax), ax ? "answering" : ax.error().message,
+                       core::realtime_ns());
+}
+
 void Daemon::Impl::acquisition_loop() {
     while (!workers_stop) {
         acq_beat = steady_ns();
         auto job = jobs.pop(kLoopPeriod);
-        if (!job) continue;
+        if (!job) {
+            probe_devices();
+            continue;
+        }
         Captured c = acquire_part(std::move(*job));
         acq_beat = steady_ns();
         if (!captured.try_push(std::move(c)))  // cannot happen: one part at a time
@@ -558,6 +595,14 @@ Captured Daemon::Impl::acquire_part(Job next) {
     c.scanned = Clock::now();
     c.margin_s = margin_s;
     read_part_temperature(c);
+    // The part has been seen by the camera and the pyrometer: it may move on while the
+    // pipeline runs (input 112).
+    server->scans_done(job.trigger.trigger_id);
+    {
+        std::lock_guard lock(stats_mutex);
+        scan_times.add(Clock::now() - job.triggered);
+    }
+    last_probe = Clock::now();  // the scans were as good as a probe
     if (accel) attach_accelerometer(c, margin_s);
     return c;
 }
@@ -580,6 +625,8 @@ std::optional<Failure> Daemon::Impl::move_to_face(const Setup& s, const std::str
             std::this_thread::sleep_for(std::chrono::nanoseconds(t_free - core::realtime_ns()));
     }
     auto moved = axis->move_to(pos->second);
+    devices.observed(Device::kAxis, static_cast<bool>(moved),
+                     moved ? "moved to face " + name : moved.error().message, core::realtime_ns());
     // An axis that answers but does not arrive in time is a timeout (204); one that is gone
     // or faulted is a lost device (203).
     if (!moved)
@@ -623,14 +670,18 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
         // head restarted with the camera resumes its stream meanwhile; judged before the reopen,
         // it was still silent and the scan began 69 ms after the stream came back: degraded).
         const int reopens = session->reopens();
-        if (auto ok = session->connect(); !ok)
+        if (auto ok = session->connect(); !ok) {
+            devices.observed(Device::kCamera, false, ok.error().message, core::realtime_ns());
             return Failure{plc::ErrorCode::kDeviceLost, "face " + name + ": " + ok.error().message};
+        }
         if (session->reopens() != reopens)
             spdlog::info("camera '{}': reopened (last failure: {})", s.config.acquisition.camera.id,
                          session->last_failure());
         if (accel) await_accel_history(margin_s);
         auto out = session->scan(s.config.acquisition.scan_s, exposure_temperature);
         acq_beat = steady_ns();
+        devices.observed(Device::kCamera, static_cast<bool>(out),
+                         out ? "scanned face " + name : out.error().message, core::realtime_ns());
         if (!out)
             return Failure{plc::ErrorCode::kDeviceLost,
                            "face " + name + ": " + out.error().message};
@@ -831,9 +882,19 @@ std::string Daemon::Impl::publish(const Captured& c, const results::ResultEntry&
     plc::PartResult published = to_plc(r, check);
     set_drift(published, entry.drift);
     published.sequence = job.sequence;
+    published.time_ns = entry.time_ns;
+    if (auto rev = job.setup->recipe_revision.find(job.trigger.recipe_slot);
+        rev != job.setup->recipe_revision.end())
+        published.recipe_revision = rev->second;
+    if (!c.left_out.empty()) published.reasons |= plc::reason::kFaceMissing;
+    if (!accel) published.reasons |= plc::reason::kNotCompensated;
     if (auto ok = server->finish(job.trigger.trigger_id, published); !ok)
         return verdict_text(r, check) + ", not published: " + ok.error().message;
     problem = r.measurement.verdict != measure::Verdict::kOk || r.degraded;
+    {
+        std::lock_guard lock(stats_mutex);
+        cycle_times.add(Clock::now() - job.triggered);
+    }
     return verdict_text(r, check);
 }
 
@@ -889,6 +950,10 @@ void Daemon::Impl::process(Captured c) {
     const core::Result<void> stored =
         log ? log->append(entry) : core::Result<void>(core::make_error(log_error));
     const double store_ms = ms_between(t1, Clock::now());
+    {
+        std::lock_guard lock(stats_mutex);
+        store_error = stored ? "" : stored.error().message;
+    }
     if (!stored)
         spdlog::error("seq {}: results NOT stored: {}; the result is only in this log: {}",
                       job.sequence, stored.error().message, pipeline::to_json(r));
@@ -974,7 +1039,10 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
     // first trigger tries again (and fails that part with the reason if it still is not).
     impl->prepare_acquisition(setup);
     const auto opening = Clock::now();
-    if (auto ok = impl->session->connect(); !ok)
+    const auto opened = impl->session->connect();
+    impl->devices.observed(Device::kCamera, static_cast<bool>(opened),
+                           opened ? "opened" : opened.error().message, core::realtime_ns());
+    if (const auto& ok = opened; !ok)
         spdlog::warn("camera {}: {} (retried at the first trigger)", c.acquisition.camera.id,
                      ok.error().message);
     else if (const auto took = std::chrono::duration_cast<milliseconds>(Clock::now() - opening);

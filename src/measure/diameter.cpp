@@ -258,6 +258,7 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
     if (!fe) return;
     std::vector<double> sector_d;
     coverage(ctx, *fe, r, sector_d);
+    r.low_coverage = r.arc_deg < ctx.c.free_centre_min_arc_deg;
     if (r.arc_deg < ctx.c.min_arc_deg) {
         r.reason = "edge seen on only " + std::to_string(static_cast<int>(r.arc_deg)) + "° of arc";
         return;

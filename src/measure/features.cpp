@@ -28,6 +28,7 @@ void measure_one(const detail::Context& ctx, const FrameRefs& frames, const Feat
         auto it = frames.find(name);
         if (it == frames.end()) {
             r.reason = "face '" + name + "' is not in the recording";
+            r.face_missing = true;
             return;
         }
         used.push_back(it->second);

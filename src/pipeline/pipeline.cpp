@@ -329,6 +329,8 @@ std::string to_json(const PartResult& r) {
         fj["verdict"] = measure::to_string(f.verdict);
         fj["reason"] = f.reason.empty() ? json() : json(f.reason);
         fj["degraded"] = f.degraded;
+        fj["face_missing"] = f.face_missing;
+        fj["low_coverage"] = f.low_coverage;
         fj["left_out"] = f.left_out;
         const bool measured = f.hot_mm.has_value();
         fj["fit_rms_mm"] = measured ? json(f.fit_rms_mm) : json();

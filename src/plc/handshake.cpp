@@ -49,6 +49,7 @@ core::Result<void> check_result(const PartResult& r) {
 Handshake::Handshake(WordOrder order, std::uint16_t first_sequence) : order_(order) {
     inputs_[ir::kMapVersionReg] = kMapVersion;
     inputs_[ir::kSequence] = first_sequence;
+    inputs_[ir::kCalibrationAge] = 0xFFFF;
     set_state(State::kIdle);
     clear_result();
 }
@@ -66,6 +67,10 @@ void Handshake::set_state(State s) {
 
 void Handshake::clear_result() {
     inputs_[ir::kOverallVerdict] = static_cast<std::uint16_t>(Verdict::kNone);
+    inputs_[ir::kReasons] = 0;
+    put32(ir::kResultTime, 0);
+    inputs_[ir::kResultTimeMs] = 0;
+    inputs_[ir::kRecipeRevision] = 0;
     inputs_[ir::kFeatureCount] = 0;
     inputs_[ir::kDriftCount] = 0;
     inputs_[ir::kTemperature] = std::bit_cast<std::uint16_t>(kInvalidInt16);
@@ -130,6 +135,7 @@ PlcEvent Handshake::start_cycle() {
     put32(ir::kPartId, e.trigger.part_id);
     inputs_[ir::kRecipeSlot] = e.trigger.recipe_slot;
     inputs_[ir::kFace] = holding_[hr::kFace];
+    set_phase(ScanPhase::kScanning);
     set_state(State::kBusy);
     return e;
 }
@@ -143,6 +149,7 @@ std::optional<PlcEvent> Handshake::back_to_idle() {
     inputs_[ir::kRecipeSlot] = 0;
     inputs_[ir::kFace] = 0;
     inputs_[ir::kErrorCode] = 0;
+    set_phase(ScanPhase::kNone);
     set_state(State::kIdle);
     if (was == State::kBusy || was == State::kFault) return PlcEvent{PlcEvent::Kind::kReset, {}};
     return std::nullopt;
@@ -160,6 +167,7 @@ core::Result<void> Handshake::finish(std::uint32_t trigger_id, const PartResult&
         return ok;
     }
     std::uint16_t drifting = 0;
+    std::uint16_t reasons = result.reasons;
     for (const auto& f : result.features) {
         const std::uint16_t a = ir::feature(f.slot);
         const std::int32_t um = to_um(f.value_mm);
@@ -171,9 +179,18 @@ core::Result<void> Handshake::finish(std::uint32_t trigger_id, const PartResult&
         inputs_[a + ir::kValueMm] = m[0];
         inputs_[a + ir::kValueMm + 1] = m[1];
         inputs_[a + ir::kVerdict] = static_cast<std::uint16_t>(f.verdict);
-        inputs_[a + ir::kDrift] = static_cast<std::uint16_t>(f.drift);
+        inputs_[a + ir::kDrift] = static_cast<std::uint16_t>(
+            static_cast<std::uint16_t>(f.drift) | (std::uint16_t{f.reasons} << ir::kReasonShift));
         if (f.drift == DriftState::kUp || f.drift == DriftState::kDown) ++drifting;
+        reasons |= f.reasons;
     }
+    inputs_[ir::kReasons] = reasons;
+    if (result.time_ns > 0) {
+        put32(ir::kResultTime, static_cast<std::uint32_t>(result.time_ns / 1'000'000'000));
+        inputs_[ir::kResultTimeMs] = static_cast<std::uint16_t>(result.time_ns / 1'000'000 % 1000);
+    }
+    inputs_[ir::kRecipeRevision] = result.recipe_revision;
+    set_phase(ScanPhase::kScansDone);
     inputs_[ir::kDriftCount] = drifting;
     inputs_[ir::kFeatureCount] = static_cast<std::uint16_t>(result.features.size());
     inputs_[ir::kOverallVerdict] = static_cast<std::uint16_t>(result.overall);
@@ -189,8 +206,30 @@ void Handshake::fault(std::uint16_t code) {
     if (code == 0) code = static_cast<std::uint16_t>(ErrorCode::kInternal);
     clear_result();
     inputs_[ir::kErrorCode] = code;
+    set_phase(ScanPhase::kNone);
     set_state(State::kFault);
 }
+
+void Handshake::scans_done(std::uint32_t trigger_id) {
+    if (state_ == State::kBusy && trigger_id == trigger_id_) set_phase(ScanPhase::kScansDone);
+}
+
+void Handshake::set_cell_status(const CellStatus& s) {
+    const auto ms = [](std::optional<double> seconds) -> std::uint16_t {
+        if (!seconds || !std::isfinite(*seconds) || *seconds <= 0) return 0;
+        return static_cast<std::uint16_t>(std::clamp(std::lround(*seconds * 1000.0), 1L, 65535L));
+    };
+    inputs_[ir::kDeviceHealth] = s.device_faults;
+    inputs_[ir::kCalibrationState] = static_cast<std::uint16_t>(s.calibration);
+    inputs_[ir::kCalibrationAge] =
+        s.calibration_age_days
+            ? static_cast<std::uint16_t>(std::clamp(*s.calibration_age_days, 0, 65534))
+            : std::uint16_t{0xFFFF};
+    inputs_[ir::kExpectedScanMs] = ms(s.expected_scan_s);
+    inputs_[ir::kExpectedCycleMs] = ms(s.expected_cycle_s);
+}
+
+void Handshake::set_phase(ScanPhase p) { inputs_[ir::kScanPhase] = static_cast<std::uint16_t>(p); }
 
 void Handshake::tick_heartbeat() { ++inputs_[ir::kHeartbeat]; }
 

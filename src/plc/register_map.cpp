@@ -175,9 +175,36 @@ const std::vector<Row>& status_rows() {
         {ir::kFeatureCount, 1, "uint16", "feature count", "features in the result, 0 when none"},
         {ir::kTemperature, 1, "int16", "part temperature",
          "0.1 °C (10500 = 1050.0 °C); -32768 unknown"},
-        {ir::kMapVersionReg, 1, "uint16", "map version", "3 for this map"},
+        {ir::kMapVersionReg, 1, "uint16", "map version", "4 for this map"},
         {ir::kDriftCount, 1, "uint16", "drift warnings",
          "features of the result whose die is drifting (drift 2 or 3), 0 when none"},
+    };
+    return rows;
+}
+
+// hotgauge -> PLC after the feature blocks (map version 4), mirrored like the others.
+const std::vector<Row>& cell_rows() {
+    static const std::vector<Row> rows = {
+        {ir::kScanPhase, 1, "uint16", "scan phase",
+         "0 no cycle, 1 scanning: the part must stay, 2 scans done: the part may move; live"},
+        {ir::kDeviceHealth, 1, "uint16", "device health",
+         "a bit per device not working: 0 camera, 1 accelerometer, 2 pyrometer, 3 axis, "
+         "4 results disk; 0 all well; live"},
+        {ir::kReasons, 1, "uint16", "reasons",
+         "reason bits of the result (below), 0 when OK or no result"},
+        {ir::kResultTime, 2, "uint32", "result time",
+         "Unix seconds (UTC) of the result, as the results files' `time`; 0 no result"},
+        {ir::kResultTimeMs, 1, "uint16", "result time ms", "its milliseconds, 0..999"},
+        {ir::kRecipeRevision, 1, "uint16", "recipe revision",
+         "checksum of the result's recipe file, as `hotgauge plc map --recipe` prints it"},
+        {ir::kCalibrationState, 1, "uint16", "calibration state",
+         "0 unknown, 1 valid, 2 due (older than its interval), 3 geometry not measured; live"},
+        {ir::kCalibrationAge, 1, "uint16", "calibration age",
+         "days since the calibration, 65535 unknown; live"},
+        {ir::kExpectedScanMs, 1, "uint16", "expected scan time",
+         "ms from trigger to scan phase 2 (median of recent cycles), 0 not known yet; live"},
+        {ir::kExpectedCycleMs, 1, "uint16", "expected cycle time",
+         "ms from trigger to DONE (median of recent cycles), 0 not known yet; live"},
     };
     return rows;
 }
@@ -185,6 +212,16 @@ const std::vector<Row>& status_rows() {
 std::string range(std::uint32_t first, int words) {
     if (words == 1) return std::to_string(first);
     return std::to_string(first) + "–" + std::to_string(first + static_cast<unsigned>(words) - 1);
+}
+
+void input_rows(std::ostream& o, const std::vector<Row>& rows) {
+    o << "| Input (0-based) | 3xxxx | Holding mirror (0-based) | 4xxxx | Type | Name | Meaning |\n";
+    o << "| --- | --- | --- | --- | --- | --- | --- |\n";
+    for (const auto& r : rows)
+        o << "| " << range(r.address, r.words) << " | " << range(30001u + r.address, r.words)
+          << " | " << range(hr::kMirrorBase + r.address, r.words) << " | "
+          << range(40001u + hr::kMirrorBase + r.address, r.words) << " | " << r.type << " | "
+          << r.name << " | " << r.meaning << " |\n";
 }
 
 }  // namespace
@@ -197,15 +234,10 @@ std::string map_markdown() {
         o << "| " << range(r.address, r.words) << " | " << range(40001u + r.address, r.words)
           << " | " << r.type << " | " << r.name << " | " << r.meaning << " |\n";
     o << "\n";
-    o << "| Input (0-based) | 3xxxx | Holding mirror (0-based) | 4xxxx | Type | Name | Meaning |\n";
-    o << "| --- | --- | --- | --- | --- | --- | --- |\n";
-    for (const auto& r : status_rows())
-        o << "| " << range(r.address, r.words) << " | " << range(30001u + r.address, r.words)
-          << " | " << range(hr::kMirrorBase + r.address, r.words) << " | "
-          << range(40001u + hr::kMirrorBase + r.address, r.words) << " | " << r.type << " | "
-          << r.name << " | " << r.meaning << " |\n";
+    input_rows(o, status_rows());
     o << "\n";
-    o << "| Feature slot | Input (0-based): µm int32 / mm float32 / verdict / drift | 3xxxx | "
+    o << "| Feature slot | Input (0-based): µm int32 / mm float32 / verdict / drift and reasons | "
+         "3xxxx | "
          "Holding mirror 4xxxx |\n";
     o << "| --- | --- | --- | --- |\n";
     auto triple = [](std::uint32_t base) {
@@ -217,6 +249,8 @@ std::string map_markdown() {
         o << "| " << slot << " | " << triple(a) << " | " << triple(30001u + a) << " | "
           << triple(40001u + hr::kMirrorBase + a) << " |\n";
     }
+    o << "\n";
+    input_rows(o, cell_rows());
     return o.str();
 }
 

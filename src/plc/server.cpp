@@ -239,6 +239,16 @@ void Server::fault(std::uint16_t code) {
     log().warn("FAULT {} ({})", code, to_string(static_cast<ErrorCode>(code)));
 }
 
+void Server::scans_done(std::uint32_t trigger_id) {
+    std::lock_guard lock(impl_->mutex);
+    impl_->handshake.scans_done(trigger_id);
+}
+
+void Server::set_cell_status(const CellStatus& s) {
+    std::lock_guard lock(impl_->mutex);
+    impl_->handshake.set_cell_status(s);
+}
+
 State Server::state() const {
     std::lock_guard lock(impl_->mutex);
     return impl_->handshake.state();

@@ -73,6 +73,10 @@ class CameraSession {
     // Opens the camera unless it is open. While the backoff after a failure runs, fails at once
     // with "camera unavailable ... next attempt in N ms" without touching the network.
     core::Result<void> connect();
+    // Between scans (the daemon asks while idle): whether the camera is there and still grants
+    // us control (one register read). One that does not is closed; one that is closed is opened
+    // again once its backoff allows. The error says why it is not there.
+    core::Result<void> check();
     // One face: exposure for the temperature, then frames for `seconds`. `on_started` runs once
     // acquisition has started (the accelerometer window, the axis). A lost camera fails the scan
     // with the reason (nothing partial is returned) and closes it; the next connect() reopens.

@@ -5,6 +5,7 @@
 // the target in position. A controller that faults, vanishes or takes longer than the timeout
 // fails the move with the reason; the next move reconnects.
 #include <chrono>
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -25,6 +26,8 @@ class ModbusAxis {
     // Moves to controller position `position` (1..N) and returns once it is there: true if it
     // moved, false if it was there already. Errors name the controller's address.
     core::Result<bool> move_to(int position);
+    // Between parts: the controller answers a read of its registers (reconnecting if need be).
+    core::Result<void> check();
     // Whether the last failed move failed by taking longer than the timeout (the controller
     // answered but the axis did not arrive).
     bool timed_out() const { return timed_out_; }
@@ -32,6 +35,7 @@ class ModbusAxis {
   private:
     core::Result<void> connect();
     void disconnect();
+    core::Result<void> read_status(std::uint16_t (&regs)[4]);  // target .. state, one reconnect
     core::Error fail(const std::string& why);
 
     std::string host_;

@@ -40,8 +40,11 @@ struct AcquisitionConfig {
 };
 
 struct DaemonConfig {
-    std::filesystem::path file;                    // where it was read from
-    std::filesystem::path calibration_file;        // the cell's measured geometry (calib)
+    std::filesystem::path file;              // where it was read from
+    std::filesystem::path calibration_file;  // the cell's measured geometry (calib)
+    // Older than this, the calibration is due (PLC input 119, the status page); the quality
+    // department's interval.
+    int calibration_interval_days = 180;
     std::map<int, std::filesystem::path> recipes;  // PLC recipe slot -> recipe file
     std::map<int, std::filesystem::path> models;   // optional saved .hgm models per slot
     // Master slots (docs/verification.md): slot -> the master's certificate; the slot's recipe
@@ -59,13 +62,18 @@ struct DaemonConfig {
     std::optional<plc::PyrometerConfig> pyrometer;  // absent: the temperature comes from nowhere
     results::ResultsConfig results;
     results::ArchiveConfig archive;
-    QualityConfig quality;  // results.drift_baseline, .lot_report, .lot_report_every_s
-    std::string hash;       // of the file's bytes: goes with every result
+    QualityConfig quality;           // results.drift_baseline, .lot_report, .lot_report_every_s
+    int results_min_free_mb = 1024;  // less free space on the results disk: a device fault
+    std::string hash;                // of the file's bytes: goes with every result
 };
 
 // FNV-1a over each file's name and bytes and then `extra`, as 16 hex digits: a hash of
 // everything that decided a result (daemon.hpp's Setup::result_hash).
 std::string files_hash(const std::vector<std::filesystem::path>& files, const std::string& extra);
+
+// The recipe file's 16-bit revision for the PLC (input 118, `hotgauge plc map --recipe`): its
+// bytes' FNV-1a, folded; any edit changes it (with odds 1 in 65 536 of a repeat).
+std::uint16_t recipe_revision(const std::filesystem::path& recipe_file);
 
 // Reads and validates; errors name file:line and the key. Referenced files (recipes, models,
 // the calibration) must exist; their content is checked by their own readers at start.

@@ -26,6 +26,7 @@
 #include "hotgauge/acquire/triangulation.hpp"
 #include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/cell/config.hpp"
+#include "hotgauge/cell/health.hpp"
 #include "hotgauge/core/master.hpp"
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/result.hpp"
@@ -46,6 +47,7 @@ struct Setup {
     // calibration, the recipe, a saved model, a master certificate, the software version), with
     // every result: a changed tolerance is a changed hash.
     std::map<int, std::string> result_hash;
+    std::map<int, std::uint16_t> recipe_revision;  // by slot: PLC input 118
     std::optional<acquire::Triangulation> triangulation;
     acquire::ExposureTable exposure;
 };
@@ -77,7 +79,8 @@ struct DaemonStats {
     std::uint64_t triggers = 0, measured = 0, failed = 0, reloads = 0, rejected_reloads = 0;
     std::uint64_t next_sequence = 0;
     std::optional<PartTiming> last;
-    std::string state;  // as in STATUS=
+    std::string state;    // as in STATUS=
+    DeviceHealth health;  // as at the PLC's input 113, updated every control loop
 };
 
 class Daemon {

@@ -72,6 +72,10 @@ struct FeatureResult {
     std::vector<std::string> faces;
     Verdict verdict = Verdict::kNotMeasured;
     std::string reason;  // why not measured / NOK / degraded; empty when OK
+    // What the data lacked, for the PLC's reason bits (docs/plc-modbus.md "Reason bits"): a face
+    // it needs is not in the recording; its edge seen on less than free_centre_min_arc_deg.
+    bool face_missing = false;
+    bool low_coverage = false;
     // Untrusted profiles of its faces (core::describe of each run): left out of its fits, or,
     // when it could not be measured without them, used and the feature degraded.
     std::vector<std::string> left_out;

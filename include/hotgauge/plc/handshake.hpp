@@ -27,6 +27,7 @@ struct FeatureValue {
     std::optional<double> value_mm;           // absent: not measured (verdict must say so)
     Verdict verdict = Verdict::kNotMeasured;  // kOk, kNok, kNotMeasured or kDegraded
     DriftState drift = DriftState::kNone;
+    std::uint8_t reasons = 0;  // reason:: bits 0..7
 };
 
 struct PartResult {
@@ -37,6 +38,17 @@ struct PartResult {
     // PLC's count continues across restarts and names the results-file row. Unset: the last
     // DONE's + 1 (a server without results files, `hotgauge plc serve`).
     std::optional<std::uint64_t> sequence;
+    std::uint16_t reasons = 0;  // the part's own reason bits; the features' are added
+    std::int64_t time_ns = 0;   // the result's time, Unix ns (the results files' `time`); 0 none
+    std::uint16_t recipe_revision = 0;
+};
+
+// The cell's live status (inputs 113, 119..122), updated in every state.
+struct CellStatus {
+    std::uint16_t device_faults = 0;  // cell::DeviceHealth::fault_bits()
+    CalibrationState calibration = CalibrationState::kUnknown;
+    std::optional<int> calibration_age_days;
+    std::optional<double> expected_scan_s, expected_cycle_s;  // absent: not known yet
 };
 
 // The overall verdict by the documented rule: any NOK -> NOK; else any not measured -> not
@@ -81,6 +93,10 @@ class Handshake {
     core::Result<void> finish(std::uint32_t trigger_id, const PartResult& result);
     // Any state -> FAULT with `code` (0 is taken as kInternal); results are cleared.
     void fault(std::uint16_t code);
+    // BUSY for `trigger_id`: its scans are done, the part may move (input 112). Ignored
+    // otherwise (a late call for an aborted cycle).
+    void scans_done(std::uint32_t trigger_id);
+    void set_cell_status(const CellStatus& s);
     void tick_heartbeat();
 
     State state() const { return state_; }
@@ -95,6 +111,7 @@ class Handshake {
     PlcEvent start_cycle();
     std::optional<PlcEvent> back_to_idle();
     void set_state(State s);
+    void set_phase(ScanPhase p);
     void clear_result();
     void put32(std::uint16_t address, std::uint32_t v);
 

@@ -16,7 +16,10 @@ namespace hotgauge::plc {
 
 // 2: per-feature verdict 4 degraded (a value the data cannot vouch for), docs/plc-modbus.md.
 // 3: die id (holding 6), the drift warning per feature and its count (input 15).
-inline constexpr std::uint16_t kMapVersion = 3;
+// 4: the cell's status after the feature blocks (scan phase, device health, reasons, result time,
+//    recipe revision, calibration, expected times, inputs 112..122) and each feature's reason
+//    bits in the high byte of its block's sixth register.
+inline constexpr std::uint16_t kMapVersion = 4;
 inline constexpr int kMaxFeatures = 16;
 
 // Holding registers: 0..6 are written by the PLC (the only writable block); the input registers
@@ -55,8 +58,24 @@ inline constexpr std::uint16_t kFeatureStride = 6;
 inline constexpr std::uint16_t kValueUm = 0;  // int32 µm, kInvalidInt32 if not measured
 inline constexpr std::uint16_t kValueMm = 2;  // float32 mm, NaN if not measured
 inline constexpr std::uint16_t kVerdict = 4;  // Verdict
-inline constexpr std::uint16_t kDrift = 5;    // Drift
-inline constexpr std::uint16_t kCount = kFeatureBase + kMaxFeatures * kFeatureStride;  // 112
+inline constexpr std::uint16_t kDrift = 5;    // low byte DriftState, high byte reason bits
+inline constexpr int kReasonShift = 8;        // a feature's reason bits: (register >> 8)
+inline constexpr std::uint16_t kFeatureEnd = kFeatureBase + kMaxFeatures * kFeatureStride;  // 112
+// The cell's status after the feature blocks (map version 4). Live: updated in every state.
+inline constexpr std::uint16_t kScanPhase = 112;     // ScanPhase: the part may move at 2
+inline constexpr std::uint16_t kDeviceHealth = 113;  // bit per device (cell::Device) not working
+// Of the result (DONE only, else 0):
+inline constexpr std::uint16_t kReasons = 114;         // reason bits of the part (Reason)
+inline constexpr std::uint16_t kResultTime = 115;      // uint32 Unix seconds (UTC), 2 registers
+inline constexpr std::uint16_t kResultTimeMs = 117;    // milliseconds of the result time
+inline constexpr std::uint16_t kRecipeRevision = 118;  // 16-bit checksum of the recipe file
+// Live again:
+inline constexpr std::uint16_t kCalibrationState = 119;  // CalibrationState
+inline constexpr std::uint16_t kCalibrationAge = 120;    // days since calibrated, 0xFFFF unknown
+inline constexpr std::uint16_t kExpectedScanMs = 121;    // trigger -> scans done, ms; 0 unknown
+inline constexpr std::uint16_t kExpectedCycleMs = 122;   // trigger -> DONE, ms; 0 unknown
+inline constexpr std::uint16_t kCount = 123;
+static_assert(kScanPhase == kFeatureEnd && kCount <= 125, "one read request holds the whole map");
 
 // First register of feature `slot` (1-based).
 constexpr std::uint16_t feature(int slot) {
@@ -80,6 +99,30 @@ enum class Verdict : std::uint16_t {
 // Per feature, the drift warning of its die (docs/quality.md "In the daemon"): kNone while the
 // baseline is collected (or no value), kWatching, kUp / kDown while the EWMA is beyond its limit.
 enum class DriftState : std::uint16_t { kNone = 0, kWatching = 1, kUp = 2, kDown = 3 };
+// Where the cycle is (input 112): the part must stay on the support while scanning; from
+// kScansDone on (before the result, which takes the pipeline's time) it may move.
+enum class ScanPhase : std::uint16_t { kNone = 0, kScanning = 1, kScansDone = 2 };
+// Why a feature or the part is not simply OK (docs/plc-modbus.md "Reason bits"): one set of
+// bits for both. A feature carries bits 0..5 and 7 in its block's high byte; the part's register
+// (input 114) is the OR of its features' bits and the part's own (6, and 1, 4, 5 from the cell).
+namespace reason {
+inline constexpr std::uint16_t kNotMeasured = 1u << 0;         // no value
+inline constexpr std::uint16_t kDegraded = 1u << 1;            // untrusted data: sorts nothing
+inline constexpr std::uint16_t kOutsideTolerance = 1u << 2;    // deviation beyond its limits
+inline constexpr std::uint16_t kLowCoverage = 1u << 3;         // an edge seen on a partial arc
+inline constexpr std::uint16_t kTemperatureUnknown = 1u << 4;  // no cold value: no temperature
+inline constexpr std::uint16_t kFaceMissing = 1u << 5;         // a face it needs was not scanned
+inline constexpr std::uint16_t kNotCompensated = 1u << 6;      // no accelerometer configured
+inline constexpr std::uint16_t kMasterCheckFailed = 1u << 7;   // off its master certificate
+}  // namespace reason
+// The calibration the cell measures with (input 119): kDue once older than the configured
+// interval; kNotMeasured when its faces' geometry is design values (method nominal or sensor).
+enum class CalibrationState : std::uint16_t {
+    kUnknown = 0,  // no readable calibration date
+    kValid = 1,
+    kDue = 2,
+    kNotMeasured = 3
+};
 enum class Face : std::uint16_t { kAll = 0, kTop = 1, kBottom = 2, kSide1 = 3, kSide2 = 4 };
 inline constexpr std::uint16_t kMaxFace = 4;
 

@@ -62,6 +62,8 @@ class Server {
     // Publishes the result of `trigger_id` (BUSY -> DONE) as one block; see Handshake::finish.
     core::Result<void> finish(std::uint32_t trigger_id, const PartResult& result);
     void fault(std::uint16_t code);
+    void scans_done(std::uint32_t trigger_id);  // see Handshake::scans_done
+    void set_cell_status(const CellStatus& s);
 
     State state() const;
     Handshake::InputImage inputs() const;
