@@ -17,6 +17,16 @@ cleanup() {
 trap cleanup EXIT
 fail() { echo "FAIL: $*"; [ -f "$tmp/serve.log" ] && tail -20 "$tmp/serve.log"; exit 1; }
 
+# Which feature is in which slot: hub-a's 13, each with its first input register; a recipe that
+# is not there is an error naming it.
+recipe="$(dirname "$0")/../config/parts/hub-a.yaml"
+slots=$("$bin" plc map --recipe "$recipe") || fail "plc map --recipe failed"
+[ "$(grep -c '^| [0-9]' <<< "$slots")" = 13 ] || fail "plc map --recipe: not 13 slots: $slots"
+grep -q '^| 3 | Diameter 3 | 28–29 / 30–31 / 32 / 33 | 30029 |' <<< "$slots" \
+  || fail "plc map --recipe: slot 3 is not Diameter 3 at input 28: $slots"
+if "$bin" plc map --recipe "$tmp/none.yaml" > "$tmp/out" 2>&1; then fail "no recipe, exit 0"; fi
+grep -q "none.yaml" "$tmp/out" || fail "the error does not name the file: $(cat "$tmp/out")"
+
 start_server() {
   rm -f "$tmp/port"
   "$bin" plc serve --bind 127.0.0.1 --port 0 --port-file "$tmp/port" --busy-ms 2000 "$@" \
