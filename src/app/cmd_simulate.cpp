@@ -47,7 +47,29 @@ struct SimulateArgs {
     std::string pyrometer_device;      // "" = no pyrometer
     int sensor_views = 0;              // > 0: the head's checkerboard views instead of a part
     std::uint64_t master_seed = 1000;  // serve: the cold master's seed (--master-part)
+    std::string replay;                // serve: replay this recording (docs/virtual-cell.md)
+    std::string calibration;           // replay: the receiving daemon's calibration
+    double scan_s = 1.3;               // replay: the daemon's camera.scan_s
 };
+
+// --replay REC: the recording and the daemon's calibration, or the first problem (named file).
+core::Result<vcell::ReplayConfig> load_replay(const SimulateArgs& a) {
+    if (a.calibration.empty())
+        return core::make_error(
+            "simulate --replay: --calibration FILE is required (the daemon's calibration)");
+    if (!(a.scan_s > 0.2))
+        return core::make_error("simulate --replay: --scan-s must be > 0.2 s (the daemon's scan)");
+    vcell::ReplayConfig r;
+    r.dir = a.replay;
+    r.scan_s = a.scan_s;
+    auto rec = io::read_recording(a.replay);
+    if (!rec) return core::make_error("simulate --replay: " + rec.error().message);
+    r.recording = std::move(*rec);
+    auto cal = calib::read_calibration(a.calibration);
+    if (!cal) return core::make_error("simulate --replay: " + cal.error().message);
+    r.calibration = std::move(*cal);
+    return r;
+}
 
 // The virtual head's checkerboard views for `calibrate sensor` (docs/calibration.md "Sensor"):
 // OUT/views.yaml with its images, and OUT/sensor-truth.yaml, the cell's nominal calibration
@@ -102,6 +124,14 @@ int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cel
         a.vc.peaks.intensity = true;
         a.vc.device.multipart_parts = a.vc.peaks.rows_per_profile();
     }
+    if (!a.replay.empty()) {
+        auto replay = load_replay(a);
+        if (!replay) {
+            spdlog::error("{}", replay.error().message);
+            return 1;
+        }
+        a.vc.replay = std::move(*replay);
+    }
     // Signals are taken by sigtimedwait below: block them before any thread starts.
     sigset_t signals;
     sigemptyset(&signals);
@@ -150,6 +180,14 @@ int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cel
         static_cast<unsigned long long>(st.accel_datagrams),
         static_cast<unsigned long long>(st.accel_samples),
         static_cast<unsigned long long>(st.accel_send_errors));
+    if (a.vc.replay) {
+        const vcell::EncodeStats e = vcell.replay_stats();
+        std::printf(
+            "replayed %s: %lld points as peaks exactly, %lld not (up to %.3g um off), "
+            "%lld without a return\n",
+            a.replay.c_str(), static_cast<long long>(e.exact), static_cast<long long>(e.inexact),
+            e.max_error_mm * 1e3, static_cast<long long>(e.no_return));
+    }
     return 0;
 }
 
@@ -334,6 +372,13 @@ Command add_simulate(CLI::App& app) {
     s->add_flag("--intensity", a->vc.peaks.intensity, "serve: peaks mode sends an intensity row");
     s->add_flag("--multipart", a->multipart,
                 "serve: peaks mode sends range and intensity as parts of one multi-part buffer");
+    s->add_option("--replay", a->replay,
+                  "serve: replay this recording (its faces as peak frames, its accelerometer "
+                  "record and temperature) instead of simulating parts; needs --calibration");
+    s->add_option("--calibration", a->calibration,
+                  "replay: the calibration of the daemon that receives it");
+    s->add_option("--scan-s", a->scan_s, "replay: the daemon's scan length (camera.scan_s)")
+        ->capture_default_str();
     s->add_option("--seconds", a->seconds, "serve: stop after this long (0: at SIGINT/SIGTERM)")
         ->capture_default_str();
     return [a] { return run(*a); };

@@ -224,6 +224,7 @@ struct GvDevice::Impl {
     // AcquisitionStart commands received: a stop and a start between two frames are still a new
     // acquisition (its frame 0 starts the axis again). Written and read under camera_mutex.
     std::uint64_t acquisition_starts = 0;
+    std::int64_t acquisition_start_ns = 0;  // realtime of the last AcquisitionStart
 
     // Control thread only.
     bool has_controller = false;
@@ -383,8 +384,10 @@ void GvDevice::Impl::handle(const std::uint8_t* packet, std::size_t size, const 
         default:
             ack = ack_header(kStatusNotImplemented, static_cast<std::uint16_t>(command + 1), 0, id);
     }
-    if (!acquiring_before && arv_fake_camera_get_acquisition_status(camera) != 0)
+    if (!acquiring_before && arv_fake_camera_get_acquisition_status(camera) != 0) {
         ++acquisition_starts;
+        acquisition_start_ns = real_time_us() * 1000;
+    }
     // The first to take the privilege becomes the controller; giving it up ends that.
     const bool privileged = arv_fake_camera_get_control_channel_privilege(camera) != 0;
     if (!has_controller && privileged) {
@@ -479,7 +482,10 @@ void GvDevice::Impl::run_stream() {
             ++acquisition;
             frame_in_acquisition = 0;
             streaming_before = true;
-            next_us = static_cast<std::int64_t>(aligned_us);
+            next_us =
+                config.renderer_paces ? real_time_us() : static_cast<std::int64_t>(aligned_us);
+        } else if (config.renderer_paces) {
+            next_us = real_time_us();
         } else {
             next_us += period_us;
             if (real_time_us() - next_us > 1'000'000) {
@@ -520,6 +526,7 @@ void GvDevice::Impl::run_stream() {
             req.offset_y = static_cast<int>(reg(ARV_FAKE_CAMERA_REGISTER_Y_OFFSET));
             req.pixel_format = reg(ARV_FAKE_CAMERA_REGISTER_PIXEL_FORMAT);
             req.exposure_us = reg(ARV_FAKE_CAMERA_REGISTER_EXPOSURE_TIME_US);
+            req.acquisition_start_ns = acquisition_start_ns;
             packet_size = reg(kStreamPacketSizeRegister) & 0xffff;
             GSocketAddress* destination = arv_fake_camera_get_stream_address(camera);
             sockaddr_in native{};
@@ -532,6 +539,7 @@ void GvDevice::Impl::run_stream() {
         }
         req.bytes_per_pixel =
             static_cast<int>(ARV_PIXEL_FORMAT_BIT_PER_PIXEL(req.pixel_format) / 8);
+        const std::uint32_t previous_id = frame_id;
         frame_id = frame_id % 65535 + 1;  // 16-bit block ids; 0 is reserved
         req.frame_id = frame_id;
         req.timestamp_ns = next_us * 1000;
@@ -541,6 +549,10 @@ void GvDevice::Impl::run_stream() {
                         static_cast<std::size_t>(std::max(1, req.bytes_per_pixel)),
                     0);
         if (renderer) renderer(req, data);
+        if (!req.send) {  // no frame: its block id is not used
+            frame_id = previous_id;
+            continue;
+        }
         {
             // Stopped, or stopped and started again, while it was rendered: dropped, as a
             // camera drops the frame in progress (it belongs to no acquisition now).

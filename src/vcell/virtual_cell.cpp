@@ -39,6 +39,31 @@ core::Result<std::shared_ptr<const LoadedPart>> build_part(const VirtualCellConf
         new LoadedPart{n, std::move(options), std::move(*scene)});
 }
 
+// Below the pyrometer's span: it reads nothing, as for a recording without a temperature.
+constexpr double kNoReadingC = 20.0;
+
+// Replay (docs/virtual-cell.md "Replay"): peaks through the receiver's calibration.
+core::Result<std::unique_ptr<RecordingPlayer>> make_player(const VirtualCellConfig& c) {
+    const ReplayConfig& r = *c.replay;
+    if (c.mode != "peaks" || c.device.multipart_parts >= 2)
+        return core::make_error(
+            "virtual cell: a replay sends single-part peak frames (--mode peaks)");
+    auto tri = calib::triangulation(r.calibration.sensor);
+    if (!tri) return tri.error();
+    PlayerConfig pc;
+    pc.dir = r.dir;
+    pc.recording = r.recording;
+    pc.clock_offset_ns = r.calibration.clock_offset_ns;
+    pc.scan_s = r.scan_s;
+    pc.line_period_s = c.line_period_s;
+    pc.encoding.format = c.peaks;
+    pc.encoding.offset_y_px = c.peak_row_offset;
+    pc.datagram_samples = static_cast<std::size_t>(
+        std::clamp(std::llround(c.cell.accel.rate_hz * c.accel_datagram_s), 1LL,
+                   static_cast<long long>(accel::kDatagramMaxSamples)));
+    return std::make_unique<RecordingPlayer>(std::move(pc), std::move(*tri));
+}
+
 core::Result<void> write_part_truth(const VirtualCellConfig& c, const LoadedPart& part) {
     if (c.truth_dir.empty()) return {};
     char name[32];
@@ -71,6 +96,7 @@ struct VirtualCell::Impl {
     std::optional<acquire::Triangulation> triangulation;
     std::int64_t t0_ns = 0;  // the vibration's time origin
     std::unique_ptr<GvDevice> device;
+    std::unique_ptr<RecordingPlayer> player;  // replay: what the camera and accelerometer send
 
     // Stream thread (the device's renderer) only.
     sim::RandomStream render_rng{0};
@@ -132,6 +158,11 @@ struct VirtualCell::Impl {
 
     // Register 7, the pyrometer and the renderer all change to `p` at once, under the lock, so
     // that a newer request (which sets register 7 to 0 under it too) is never overtaken.
+    double temperature_c() const {
+        if (config.replay) return config.replay->recording.temperature_c.value_or(kNoReadingC);
+        return current_part()->options.temperature_c;
+    }
+
     void publish(std::shared_ptr<const LoadedPart> p) {
         if (pyrometer) pyrometer->set_temperature(p->options.temperature_c);
         loaded = p->number;
@@ -141,11 +172,17 @@ struct VirtualCell::Impl {
 
     void request_part(int n);  // the axis thread: returns at once
     void run_loader();
-    void render(const FrameRequest& req, std::span<std::uint8_t> data);
+    void render(FrameRequest& req, std::span<std::uint8_t> data);
     void run_accel();
+    void run_replay_accel();
 };
 
 void VirtualCell::Impl::request_part(int n) {
+    if (player) {  // a replay has one part, the recording's: it is there at once
+        loaded = n;
+        axis->set_part_loaded(n);
+        return;
+    }
     {
         std::lock_guard lock(part_mutex);
         requested = n;  // a newer request supersedes one not yet loaded
@@ -179,7 +216,11 @@ void VirtualCell::Impl::run_loader() {
     }
 }
 
-void VirtualCell::Impl::render(const FrameRequest& req, std::span<std::uint8_t> data) {
+void VirtualCell::Impl::render(FrameRequest& req, std::span<std::uint8_t> data) {
+    if (player) {
+        player->render(req, data, face.load()->name, stop);
+        return;
+    }
     const std::shared_ptr<const LoadedPart> p = current_part();  // one part for the whole frame
     const sim::Scene& scene = p->scene;
     if (req.acquisition != acquisition) {
@@ -234,7 +275,25 @@ void VirtualCell::Impl::render(const FrameRequest& req, std::span<std::uint8_t> 
     std::memcpy(data.data(), words.data(), std::min(data.size(), words.size() * 2));
 }
 
+// Replay: the record of the face being scanned as its samples' time comes, silent otherwise.
+void VirtualCell::Impl::run_replay_accel() {
+    while (!stop) {
+        std::this_thread::sleep_for(std::chrono::duration<double>(config.accel_datagram_s));
+        for (const auto& d : player->due(core::realtime_ns())) {
+            const bool ok = sender->send(d.t_ns, d.period_ns, d.samples).ok();
+            std::lock_guard lock(stats_mutex);
+            if (ok) {
+                ++stats.accel_datagrams;
+                stats.accel_samples += d.samples.size() / 3;
+            } else {
+                ++stats.accel_send_errors;
+            }
+        }
+    }
+}
+
 void VirtualCell::Impl::run_accel() {
+    if (player) return run_replay_accel();
     const auto& a = config.cell.accel;
     const auto period_ns = static_cast<std::int64_t>(std::llround(1e9 / a.rate_hz));
     const auto per_datagram =
@@ -278,9 +337,13 @@ void VirtualCell::Impl::run_accel() {
 VirtualCell::VirtualCell(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 VirtualCell::~VirtualCell() = default;
 
-sim::SimTruth VirtualCell::truth() const { return impl_->current_part()->scene.truth(); }
-double VirtualCell::part_temperature_c() const {
-    return impl_->current_part()->options.temperature_c;
+sim::SimTruth VirtualCell::truth() const {
+    const auto p = impl_->current_part();
+    return p ? p->scene.truth() : sim::SimTruth{};
+}
+double VirtualCell::part_temperature_c() const { return impl_->temperature_c(); }
+EncodeStats VirtualCell::replay_stats() const {
+    return impl_->player ? impl_->player->stats() : EncodeStats{};
 }
 int VirtualCell::part_loaded() const { return impl_->loaded; }
 
@@ -319,10 +382,17 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
         return core::make_error("virtual cell: accelerometer rate must be > 0");
 
     std::mt19937_64 rng;
-    auto first = build_part(c, 1, rng);
-    if (!first) return first.error();
-    if (auto ok = write_part_truth(c, **first); !ok) return ok.error();
-    impl->part = std::move(*first);  // before the renderer runs
+    if (c.replay) {
+        auto player = make_player(c);
+        if (!player) return player.error();
+        impl->player = std::move(*player);
+        c.device.renderer_paces = true;
+    } else {
+        auto first = build_part(c, 1, rng);
+        if (!first) return first.error();
+        if (auto ok = write_part_truth(c, **first); !ok) return ok.error();
+        impl->part = std::move(*first);  // before the renderer runs
+    }
     impl->loaded = 1;
     std::mt19937_64 scan_rng(c.part.scan_seed ? *c.part.scan_seed : rng());
     impl->vibration.emplace(c.cell.vibration, 0.0, kServeHorizonS, scan_rng);
@@ -341,12 +411,12 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
         auto pyro = plc::PyrometerSimulator::start(*c.pyrometer, 0, 0.1);
         if (!pyro) return core::make_error("virtual cell: pyrometer: " + pyro.error().message);
         impl->pyrometer = std::move(*pyro);
-        impl->pyrometer->set_temperature(impl->part->options.temperature_c);
+        impl->pyrometer->set_temperature(impl->temperature_c());
     }
     Impl* raw = impl.get();
-    auto device = GvDevice::start(
-        c.device,
-        [raw](const FrameRequest& req, std::span<std::uint8_t> data) { raw->render(req, data); });
+    auto device = GvDevice::start(c.device, [raw](FrameRequest& req, std::span<std::uint8_t> data) {
+        raw->render(req, data);
+    });
     if (!device) return device.error();
     impl->device = std::move(*device);
     if (c.axis_port >= 0) {

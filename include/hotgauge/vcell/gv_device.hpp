@@ -27,11 +27,16 @@ struct FrameRequest {
     int bytes_per_pixel = 1;
     std::uint32_t pixel_format = 0;  // PFNC code
     double exposure_us = 0;
+    std::int64_t acquisition_start_ns = 0;  // when this acquisition's AcquisitionStart arrived
+    // The renderer's answer besides the pixels: it may replace timestamp_ns (a replay sends the
+    // recorded time), and clears `send` when it has no frame (a replay past its recording's end):
+    // nothing goes out, and no block id is used.
+    bool send = true;
 };
 
 // Fills `data` (width × height × bytes_per_pixel, row-major, little-endian words) for `request`.
 // Called on the device's stream thread.
-using Renderer = std::function<void(const FrameRequest& request, std::span<std::uint8_t> data)>;
+using Renderer = std::function<void(FrameRequest& request, std::span<std::uint8_t> data)>;
 
 struct GvDeviceConfig {
     std::string address = "127.0.0.1";  // any 127.x.y.z: several devices side by side
@@ -49,6 +54,10 @@ struct GvDeviceConfig {
     // 0 = in every one. A receiver sees a scan whose start is missing.
     int lose_scan_start = 0;
     int lose_scan_start_count = 0;
+    // The renderer sets the pace: each frame goes out when the renderer returns, not at the
+    // frame period, stamped with the time it was asked for (or the renderer's timestamp). A
+    // replay times its recorded frames itself (docs/virtual-cell.md "Replay").
+    bool renderer_paces = false;
 };
 
 struct GvDeviceStats {

@@ -22,15 +22,28 @@
 #include <string>
 
 #include "hotgauge/acquire/stripe.hpp"
+#include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/core/part.hpp"
+#include "hotgauge/core/recording.hpp"
 #include "hotgauge/core/result.hpp"
 #include "hotgauge/plc/pyrometer.hpp"
 #include "hotgauge/sim/simulator.hpp"
 #include "hotgauge/vcell/axis_server.hpp"
 #include "hotgauge/vcell/gv_device.hpp"
 #include "hotgauge/vcell/render.hpp"
+#include "hotgauge/vcell/replay.hpp"
 
 namespace hotgauge::vcell {
+
+// A recording served instead of simulated parts (docs/virtual-cell.md "Replay"): the camera sends
+// each face's recorded profiles as peak frames, the accelerometer its record, the pyrometer its
+// temperature, all shifted to now; the axis and the conveyor work as usual.
+struct ReplayConfig {
+    std::filesystem::path dir;  // for messages
+    core::Recording recording;
+    calib::Calibration calibration;  // the receiver's: its triangulation and clock offset
+    double scan_s = 1.3;             // the receiver's scan length (hotgauged camera.scan_s)
+};
 
 struct VirtualCellConfig {
     core::Recipe recipe;
@@ -64,6 +77,7 @@ struct VirtualCellConfig {
     // (20 °C: below the pyrometer's span, so it reads nothing, as on a real cell).
     std::set<int> master_parts;
     sim::SimOptions master;
+    std::optional<ReplayConfig> replay;  // set: replay it (peaks mode), no part is simulated
 };
 
 // Part n (≥ 1) of the conveyor: `base` with seed + (n − 1) and temperature + d(n), where
@@ -92,11 +106,12 @@ class VirtualCell {
 
     // The part on the support, the one the camera renders: while part N loads it is still the
     // previous one, while part_loaded() reads 0 as register 7 does.
-    sim::SimTruth truth() const;  // a copy: the part may be swapped meanwhile
+    sim::SimTruth truth() const;  // a copy: the part may be swapped meanwhile (replay: none)
     double part_temperature_c() const;
     int part_loaded() const;  // register 7: 1 at start; 0 while a part loads (or failed to)
     int axis_port() const;    // −1 without an axis
     VirtualCellStats stats() const;
+    EncodeStats replay_stats() const;  // replay: how exactly the profiles went out as peaks
 
   private:
     struct Impl;

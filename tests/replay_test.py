@@ -1,0 +1,205 @@
+#!/usr/bin/python3
+"""A part archived by hotgauged replays through the virtual cell and a second hotgauged with the
+same results (docs/virtual-cell.md "Replay", issue 20 item 3).
+
+1. The virtual line (virtual_line.py) measures one part and archives it (archive_every_nth_ok: 1).
+   Its calibration has a clock offset and travel scales off 1, the virtual cell's true geometry
+   alike, so that the replay must get the daemon's use of times and speeds right.
+2. `hotgauge simulate --serve --replay REC` serves that recording; a second hotgauged with the
+   same config measures it, triggered over Modbus by pymodbus.
+3. Every feature of the replay's result (its results JSON line) and of `hotgauge measure` of the
+   replay's own archive equals `hotgauge measure` of the original recording to 1 µm, with the
+   same verdicts; the replayed recording's profiles are the original's bit for bit.
+
+    /usr/bin/python3 replay_test.py BUILD_DIR
+"""
+import glob
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+import yaml
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from virtual_line import (DONE, FAULT, NOMINAL, Conveyor, Line, Plc, decode,  # noqa: E402
+                          hotgauge, print_logs, run_part)
+
+ADDRESS, REPLAY_ADDRESS = "127.0.0.11", "127.0.0.12"  # this test's own cameras
+PART_ID = 250001
+TOLERANCE_UM = 1.0
+
+
+def shifted_calibration(path):
+    """The nominal calibration with a camera clock 1.234567 ms behind and travel scales off 1."""
+    cal = yaml.safe_load(open(NOMINAL))
+    cal["clock_offset_ns"] = 1234567
+    for i, face in enumerate(cal["faces"]):
+        face["travel_scale"] = 1.0 + 0.0003 * (i + 1)
+    with open(path, "w") as f:
+        yaml.safe_dump(cal, f)
+    return path
+
+
+class ReplayLine(Line):
+    """The line with the replaying virtual cell instead of the simulating one."""
+
+    def __init__(self, *args, recording, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.recording = recording
+
+    def cell_argv(self, accel_to):
+        return [os.path.join(self.bin_dir, "src/app/hotgauge"), "simulate", "--serve",
+                "--address", self.address, "--mode", "peaks", "--speed-mm-s", "200",
+                "--line-rate", "1000", "--accel-to", accel_to, "--axis-port", str(self.axis_port),
+                "--pyrometer-device", self.pyrometer_sim_dev,
+                "--replay", self.recording, "--calibration", self.calibration, "--scan-s", "1.3"]
+
+
+def one_part(line, conveyor=True):
+    """One part through `line`; returns (its results JSON line, its archived recording)."""
+    line.start()
+    try:
+        plc = Plc(line.plc_port)
+        conv = Conveyor(line.axis_port) if conveyor else None
+        p = run_part(plc, conv, 1, PART_ID, timeout=60)
+        plc.close()
+        if conv:
+            conv.close()
+    finally:
+        rcs = line.stop()
+    assert rcs.get("hotgauged") == 0, rcs
+    assert p["state"] == DONE, f"part not DONE: {p}"
+    jsonl = glob.glob(os.path.join(line.results_dir, "*.jsonl"))
+    result = json.loads(open(jsonl[0]).read().splitlines()[-1])
+    rec = glob.glob(os.path.join(line.archive_dir, "*", f"*_{PART_ID}"))
+    assert len(rec) == 1, f"archive: {rec}"
+    return result, rec[0]
+
+
+def features(result):
+    return {f["name"]: f for f in result["features"]}
+
+
+def compare(label, got, want):
+    """Largest |difference| of hot and cold values, µm; fails on verdicts or a value's presence."""
+    g, w = features(got), features(want)
+    assert g.keys() == w.keys(), f"{label}: features {sorted(g)} vs {sorted(w)}"
+    worst = 0.0
+    for name, f in w.items():
+        for key in ("hot_mm", "cold_mm"):
+            a, b = g[name][key], f[key]
+            assert (a is None) == (b is None), f"{label}: {name} {key} {a} vs {b}"
+            if a is not None:
+                worst = max(worst, abs(a - b) * 1e3)
+        assert g[name]["verdict"] == f["verdict"], \
+            f"{label}: {name} verdict {g[name]['verdict']} vs {f['verdict']}"
+    assert got["verdict"] == want["verdict"], f"{label}: {got['verdict']} vs {want['verdict']}"
+    print(f"{label}: {len(w)} features, verdict {got['verdict']}, largest difference "
+          f"{worst:.6f} µm")
+    assert worst <= TOLERANCE_UM, f"{label}: {worst:.4f} µm > {TOLERANCE_UM} µm"
+    return worst
+
+
+def compare_recordings(original, replayed):
+    """The replayed recording against the original: profiles and positions bit for bit, each
+    face's profile and accelerometer times shifted by one offset, the samples the same."""
+    faces = yaml.safe_load(open(os.path.join(original, "part.yaml")))["faces"]
+    assert yaml.safe_load(open(os.path.join(replayed, "part.yaml")))["faces"] == faces
+    for face in faces:
+        a, b = (os.path.join(d, face) for d in (original, replayed))
+        load = lambda d, n: np.load(os.path.join(d, n))  # noqa: E731
+        for n in ("profiles.npy", "profile_positions.npy", "accel.npy"):
+            assert load(a, n).tobytes() == load(b, n).tobytes(), f"{face}/{n} differs"
+        dt = load(b, "profile_times.npy") - load(a, "profile_times.npy")
+        da = load(b, "accel_times.npy") - load(a, "accel_times.npy")
+        assert len(set(dt)) == 1 and set(da) == set(dt), f"{face}: times not shifted as one"
+    print(f"replayed recording: {len(faces)} faces, profiles, positions and accelerometer "
+          f"samples bit for bit, times shifted by one offset per face")
+
+
+def bad_input(bin_dir, workdir, cal, rec):
+    """An unreadable recording stops the cell at start, naming the file; a face the recording
+    lacks is no frame at all: the daemon's part fails with fault 203, the cell's log names the
+    recording and the face."""
+    r = subprocess.run([os.path.join(bin_dir, "src/app/hotgauge"), "simulate", "--serve",
+                        "--mode", "peaks", "--address", REPLAY_ADDRESS, "--seconds", "5",
+                        "--replay", os.path.join(workdir, "nothing"), "--calibration", cal],
+                       capture_output=True, text=True, timeout=60)
+    want = os.path.join(workdir, "nothing", "part.yaml") + ": missing"
+    assert r.returncode == 1 and want in r.stderr, (r.returncode, r.stderr)
+    unreadable = next(l for l in r.stderr.splitlines() if want in l)
+    three = os.path.join(workdir, "three-faces")
+    shutil.copytree(rec, three)
+    shutil.rmtree(os.path.join(three, "side2"))
+    part = yaml.safe_load(open(os.path.join(three, "part.yaml")))
+    part["faces"].remove("side2")
+    with open(os.path.join(three, "part.yaml"), "w") as f:
+        yaml.safe_dump(part, f)
+    d = os.path.join(workdir, "missing-face")
+    os.makedirs(d)
+    line = ReplayLine(bin_dir, d, REPLAY_ADDRESS, calibration=cal, recording=three).start()
+    try:
+        plc = Plc(line.plc_port)
+        plc.trigger(PART_ID + 1, face=4)  # side2 only
+        r = decode(plc.wait_state({DONE, FAULT}, 30))
+        plc.close()
+    finally:
+        line.stop()
+    assert r["state"] == FAULT and r["error"] == 203, r
+    log = open(os.path.join(d, "virtual-cell.log")).read()
+    want = f"{three}/part.yaml: face 'side2' is not in the recording"
+    assert want in log, log[-2000:]
+    print(f"bad input: an unreadable recording stops the cell ({unreadable.strip()}); a "
+          f"missing face sends no frame and the part fails with fault {r['error']}")
+
+
+def main():
+    bin_dir = os.path.abspath(sys.argv[1])
+    workdir = tempfile.mkdtemp(prefix="hotgauge-replay-")
+    ok = False
+    t0 = time.monotonic()
+    try:
+        cal = shifted_calibration(os.path.join(workdir, "calibration.yaml"))
+        first = os.path.join(workdir, "line")
+        os.makedirs(first)
+        line = Line(bin_dir, first, ADDRESS, calibration=cal, true_calibration=cal,
+                    archive_every_nth_ok=1)
+        result, rec = one_part(line)
+        print(f"archived by the line: {rec} ({result['part']['verdict']})")
+        second = os.path.join(workdir, "replay")
+        os.makedirs(second)
+        replay = ReplayLine(bin_dir, second, REPLAY_ADDRESS, calibration=cal,
+                            archive_every_nth_ok=1, recording=rec)
+        replayed, rec2 = one_part(replay, conveyor=False)
+        offline = json.loads(hotgauge(bin_dir, "measure", rec, "--calibration", cal, "--json"))
+        again = json.loads(hotgauge(bin_dir, "measure", rec2, "--calibration", cal, "--json"))
+        worst = max(compare("line's result vs measure of its archive", result["part"], offline),
+                    compare("replay's result vs measure of the original", replayed["part"],
+                            offline),
+                    compare("measure of the replay's archive vs the original", again, offline))
+        compare_recordings(rec, rec2)
+        cell_log = open(os.path.join(second, "virtual-cell.log")).read()
+        print(next(l for l in cell_log.splitlines() if l.startswith("replayed ")))
+        assert " 0 not " in cell_log, "profiles that did not go out exactly as peaks"
+        bad_input(bin_dir, workdir, cal, rec)
+        print(f"replay: largest feature difference {worst:.6f} µm; "
+              f"{time.monotonic() - t0:.0f} s")
+        ok = True
+    finally:
+        if not ok:
+            for d in ("line", "replay"):
+                if os.path.isdir(os.path.join(workdir, d)):
+                    print(f"=== {d} ===")
+                    print_logs(os.path.join(workdir, d))
+        else:
+            shutil.rmtree(workdir, ignore_errors=True)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
