@@ -11,8 +11,10 @@ same results (docs/virtual-cell.md "Replay", issue 20 item 3).
    replay's own archive equals `hotgauge measure` of the original recording to 1 µm, with the
    same verdicts; the replayed recording's profiles are the original's bit for bit.
 
-    /usr/bin/python3 replay_test.py BUILD_DIR
+    /usr/bin/python3 replay_test.py BUILD_DIR                  (ctest replay_through_daemon)
+    /usr/bin/python3 replay_test.py BUILD_DIR --off-grid 3     (the peak format's quantisation)
 """
+import argparse
 import glob
 import json
 import os
@@ -158,42 +160,85 @@ def bad_input(bin_dir, workdir, cal, rec):
           f"missing face sends no frame and the part fails with fault {r['error']}")
 
 
+def archived_part(bin_dir, workdir):
+    """Steps 1-3 of the module docstring and the bad input; returns the largest difference, µm."""
+    cal = shifted_calibration(os.path.join(workdir, "calibration.yaml"))
+    first = os.path.join(workdir, "line")
+    os.makedirs(first)
+    line = Line(bin_dir, first, ADDRESS, calibration=cal, true_calibration=cal,
+                archive_every_nth_ok=1)
+    result, rec = one_part(line)
+    print(f"archived by the line: {rec} ({result['part']['verdict']})")
+    second = os.path.join(workdir, "replay")
+    os.makedirs(second)
+    replay = ReplayLine(bin_dir, second, REPLAY_ADDRESS, calibration=cal,
+                        archive_every_nth_ok=1, recording=rec)
+    replayed, rec2 = one_part(replay, conveyor=False)
+    offline = json.loads(hotgauge(bin_dir, "measure", rec, "--calibration", cal, "--json"))
+    again = json.loads(hotgauge(bin_dir, "measure", rec2, "--calibration", cal, "--json"))
+    worst = max(compare("line's result vs measure of its archive", result["part"], offline),
+                compare("replay's result vs measure of the original", replayed["part"], offline),
+                compare("measure of the replay's archive vs the original", again, offline))
+    compare_recordings(rec, rec2)
+    cell_log = open(os.path.join(second, "virtual-cell.log")).read()
+    print(next(l for l in cell_log.splitlines() if l.startswith("replayed ")))
+    assert " 0 not " in cell_log, "profiles that did not go out exactly as peaks"
+    bad_input(bin_dir, workdir, cal, rec)
+    return worst
+
+
+def trim_to_daemon(rec, margin_s=0.51, profiles_per_frame=10):
+    """What the daemon would have kept of a recording that did not come from it: whole frames,
+    and the accelerometer window [first − margin, last + margin) (its margin_s + 10 ms slack)."""
+    m = int(margin_s * 1e9)
+    for face in yaml.safe_load(open(os.path.join(rec, "part.yaml")))["faces"]:
+        path = lambda n: os.path.join(rec, face, n)  # noqa: E731
+        t = np.load(path("profile_times.npy"))
+        n = len(t) // profiles_per_frame * profiles_per_frame
+        for name in ("profiles.npy", "profile_times.npy", "profile_positions.npy"):
+            np.save(path(name), np.load(path(name))[:n])
+        a = np.load(path("accel_times.npy"))
+        keep = (a >= t[0] - m) & (a < t[n - 1] + m)
+        np.save(path("accel_times.npy"), a[keep])
+        np.save(path("accel.npy"), np.load(path("accel.npy"))[keep])
+
+
+def off_grid(bin_dir, workdir, seed):
+    """A recording whose profiles are not on the peak format's grid (the offline simulator's
+    floats, as from a camera in image mode): what the format's 1/64 px does to the features."""
+    rec = os.path.join(workdir, "simulated")
+    hotgauge(bin_dir, "simulate", "--out", rec, "--seed", str(seed), "--temperature", "1050")
+    trim_to_daemon(rec)
+    d = os.path.join(workdir, "replay-simulated")
+    os.makedirs(d)
+    replayed, _ = one_part(ReplayLine(bin_dir, d, REPLAY_ADDRESS, calibration=NOMINAL,
+                                      archive_every_nth_ok=1, recording=rec), conveyor=False)
+    offline = json.loads(hotgauge(bin_dir, "measure", rec, "--calibration", NOMINAL, "--json"))
+    cell_log = open(os.path.join(d, "virtual-cell.log")).read()
+    print(next(l for l in cell_log.splitlines() if l.startswith("replayed ")))
+    return compare(f"simulated part (seed {seed}) replayed vs measured", replayed["part"], offline)
+
+
 def main():
-    bin_dir = os.path.abspath(sys.argv[1])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("bin_dir")
+    ap.add_argument("--off-grid", type=int, metavar="SEED",
+                    help="instead: replay a simulated recording off the peak grid (quantisation)")
+    a = ap.parse_args()
+    bin_dir = os.path.abspath(a.bin_dir)
     workdir = tempfile.mkdtemp(prefix="hotgauge-replay-")
     ok = False
     t0 = time.monotonic()
     try:
-        cal = shifted_calibration(os.path.join(workdir, "calibration.yaml"))
-        first = os.path.join(workdir, "line")
-        os.makedirs(first)
-        line = Line(bin_dir, first, ADDRESS, calibration=cal, true_calibration=cal,
-                    archive_every_nth_ok=1)
-        result, rec = one_part(line)
-        print(f"archived by the line: {rec} ({result['part']['verdict']})")
-        second = os.path.join(workdir, "replay")
-        os.makedirs(second)
-        replay = ReplayLine(bin_dir, second, REPLAY_ADDRESS, calibration=cal,
-                            archive_every_nth_ok=1, recording=rec)
-        replayed, rec2 = one_part(replay, conveyor=False)
-        offline = json.loads(hotgauge(bin_dir, "measure", rec, "--calibration", cal, "--json"))
-        again = json.loads(hotgauge(bin_dir, "measure", rec2, "--calibration", cal, "--json"))
-        worst = max(compare("line's result vs measure of its archive", result["part"], offline),
-                    compare("replay's result vs measure of the original", replayed["part"],
-                            offline),
-                    compare("measure of the replay's archive vs the original", again, offline))
-        compare_recordings(rec, rec2)
-        cell_log = open(os.path.join(second, "virtual-cell.log")).read()
-        print(next(l for l in cell_log.splitlines() if l.startswith("replayed ")))
-        assert " 0 not " in cell_log, "profiles that did not go out exactly as peaks"
-        bad_input(bin_dir, workdir, cal, rec)
+        worst = off_grid(bin_dir, workdir, a.off_grid) if a.off_grid is not None else \
+            archived_part(bin_dir, workdir)
         print(f"replay: largest feature difference {worst:.6f} µm; "
               f"{time.monotonic() - t0:.0f} s")
         ok = True
     finally:
         if not ok:
-            for d in ("line", "replay"):
-                if os.path.isdir(os.path.join(workdir, d)):
+            for d in sorted(os.listdir(workdir)):
+                if os.path.exists(os.path.join(workdir, d, "hotgauged.log")):
                     print(f"=== {d} ===")
                     print_logs(os.path.join(workdir, d))
         else:

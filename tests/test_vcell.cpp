@@ -26,12 +26,14 @@
 #include "hotgauge/accel/ring.hpp"
 #include "hotgauge/accel/udp.hpp"
 #include "hotgauge/acquire/camera.hpp"
+#include "hotgauge/acquire/scan.hpp"
 #include "hotgauge/acquire/session.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/plc/pyrometer.hpp"
 #include "hotgauge/sim/scene.hpp"
 #include "hotgauge/vcell/gv_device.hpp"
 #include "hotgauge/vcell/render.hpp"
+#include "hotgauge/vcell/replay.hpp"
 #include "hotgauge/vcell/virtual_cell.hpp"
 #include "serial_pair.hpp"
 #include "temp_dir.hpp"
@@ -154,6 +156,87 @@ TEST(RenderPeaks, DecodeToTheRenderedRows) {
         ++ok;
     }
     EXPECT_GT(ok, 1500);
+}
+
+// Replay (docs/virtual-cell.md "Replay"): peak rows → the receiver's profile → encode_profile
+// gives the same rows back; its decoding (decode_peaks, triangulate with the region's offsets, as
+// acquire::ScanBuilder does) is the recorded profile bit for bit.
+TEST(ReplayEncoding, PeakRowsComeBackBitForBit) {
+    const auto tri = vcell::sensor_triangulation(sensor());
+    ASSERT_TRUE(tri.ok());
+    vcell::PeakEncoding e;
+    e.format.intensity = true;
+    e.offset_x_px = 16;
+    e.offset_y_px = 40;
+    const int w = 2000;
+    std::mt19937_64 rng(7);
+    std::uniform_int_distribution<int> word(1, (1047 - 40) * 64);
+    std::vector<std::uint16_t> rows(2 * w);
+    for (int i = 0; i < w; ++i) rows[i] = i % 50 == 3 ? 0 : static_cast<std::uint16_t>(word(rng));
+    const auto points = acquire::decode_peaks(rows.data(), w, e.format);
+    std::vector<float> profile;
+    acquire::triangulate(*tri, points, profile, e.offset_x_px, e.offset_y_px);
+    std::vector<std::uint16_t> again(2 * w, 0xffff);
+    vcell::EncodeStats st;
+    vcell::encode_profile(profile, *tri, e, again.data(), st);
+    EXPECT_EQ(st.exact, w - w / 50);
+    EXPECT_EQ(st.no_return, w / 50);
+    EXPECT_EQ(st.inexact, 0);
+    for (int i = 0; i < w; ++i) {
+        ASSERT_EQ(again[i], rows[i]) << i;
+        EXPECT_EQ(again[w + i], rows[i] ? 4095 : 0) << i;  // intensity: full where there is a peak
+    }
+
+    // Off the format's grid (a recording taken in image mode): the nearest row, within half a
+    // step of 1/64 px (< 5 µm in z over the range), counted as inexact.
+    for (std::size_t i = 1; i < profile.size(); i += 2) profile[i] += 0.0011f;
+    vcell::EncodeStats off;
+    vcell::encode_profile(profile, *tri, e, again.data(), off);
+    EXPECT_EQ(off.exact + off.inexact, w - w / 50);
+    EXPECT_GT(off.inexact, w / 2);
+    EXPECT_GT(off.max_error_mm, 0.0);
+    EXPECT_LT(off.max_error_mm, 0.005);
+}
+
+TEST(ReplayFrames, FramesOfTheReceiversFormatOrTheFileAndProblem) {
+    core::FaceScan face;
+    face.name = "top";
+    for (int k = 0; k < 30; ++k)  // frames 10 ms apart, profiles 1 ms apart within
+        face.profile_times_ns.push_back(5'000'000'000LL + (k / 10) * 10'000'000 +
+                                        (k % 10) * 1'000'000);
+    auto frames = vcell::replay_frames(face, 10, 1'000'000, 1234, "REC/top");
+    ASSERT_TRUE(frames.ok()) << frames.error().message;
+    ASSERT_EQ(frames->size(), 3u);
+    EXPECT_EQ((*frames)[2].camera_ns, 5'020'000'000LL - 1234);
+    EXPECT_EQ((*frames)[2].first_profile, 20u);
+
+    auto not_whole = vcell::replay_frames(face, 7, 1'000'000, 0, "REC/top");
+    ASSERT_FALSE(not_whole.ok());
+    EXPECT_EQ(not_whole.error().message,
+              "REC/top: 30 profiles are not whole frames of 7 profiles (the receiver's profiles "
+              "per frame)");
+    face.profile_times_ns[13] += 1;
+    auto uneven = vcell::replay_frames(face, 10, 1'000'000, 0, "REC/top");
+    ASSERT_FALSE(uneven.ok());
+    EXPECT_EQ(uneven.error().message,
+              "REC/top/profile_times.npy: profile 13 is 1000001 ns after the one before, in a "
+              "frame whose profiles are 1000000 ns apart (the line period)");
+}
+
+TEST(ReplayAccel, DatagramsGiveTheRecordedTimesAndKeepGaps) {
+    core::FaceScan face;
+    for (int q = 0; q < 95; ++q)  // 2 kHz, with 10 samples lost after the 40th
+        if (q < 40 || q >= 50) face.accel_times_ns.push_back(1'000'000'000LL + q * 500'000LL);
+    const auto batches = vcell::accel_batches(face, 20);
+    std::vector<std::int64_t> times;
+    for (const auto& b : batches) {
+        EXPECT_LE(b.count, 20u);
+        EXPECT_EQ(b.first, times.size());
+        for (std::size_t q = 0; q < b.count; ++q)
+            times.push_back(b.t_ns + static_cast<std::int64_t>(q) * b.period_ns);
+    }
+    EXPECT_EQ(times, face.accel_times_ns);
+    EXPECT_EQ(batches.size(), 5u);  // 20 + 20 | 20 + 20 + 5
 }
 
 // The device with a renderer that stamps each frame with its id and remembers what it was asked.
