@@ -7,6 +7,7 @@ same results (docs/virtual-cell.md "Replay", issue 20 item 3).
    alike, so that the replay must get the daemon's use of times and speeds right.
 2. `hotgauge simulate --serve --replay REC` serves that recording; a second hotgauged with the
    same config measures it, triggered over Modbus by pymodbus.
+   Its first scan loses its start on purpose, so the daemon scans that face again at once.
 3. Every feature of the replay's result (its results JSON line) and of `hotgauge measure` of the
    replay's own archive equals `hotgauge measure` of the original recording to 1 µm, with the
    same verdicts; the replayed recording's profiles are the original's bit for bit.
@@ -50,16 +51,21 @@ def shifted_calibration(path):
 class ReplayLine(Line):
     """The line with the replaying virtual cell instead of the simulating one."""
 
-    def __init__(self, *args, recording, **kwargs):
+    def __init__(self, *args, recording, lose_first_start=False, **kwargs):
         super().__init__(*args, **kwargs)
         self.recording = recording
+        # The first scan loses its first 5 frames (50 ms): the daemon scans the face again at
+        # once, while the first scan's accelerometer record is still arriving.
+        self.cell_extra = ["--lose-scan-start", "5", "--lose-scan-start-count", "1"] \
+            if lose_first_start else []
 
     def cell_argv(self, accel_to):
         return [os.path.join(self.bin_dir, "src/app/hotgauge"), "simulate", "--serve",
                 "--address", self.address, "--mode", "peaks", "--speed-mm-s", "200",
                 "--line-rate", "1000", "--accel-to", accel_to, "--axis-port", str(self.axis_port),
                 "--pyrometer-device", self.pyrometer_sim_dev,
-                "--replay", self.recording, "--calibration", self.calibration, "--scan-s", "1.3"]
+                "--replay", self.recording, "--calibration", self.calibration, "--scan-s", "1.3"] + \
+            self.cell_extra
 
 
 def one_part(line, conveyor=True):
@@ -172,8 +178,11 @@ def archived_part(bin_dir, workdir):
     second = os.path.join(workdir, "replay")
     os.makedirs(second)
     replay = ReplayLine(bin_dir, second, REPLAY_ADDRESS, calibration=cal,
-                        archive_every_nth_ok=1, recording=rec)
+                        archive_every_nth_ok=1, recording=rec, lose_first_start=True)
     replayed, rec2 = one_part(replay, conveyor=False)
+    daemon_log = open(os.path.join(second, "hotgauged.log")).read()
+    assert daemon_log.count("the scan lost its start") == 1 and "scanning it again" in daemon_log, \
+        "the replay's first scan was to lose its start once"
     offline = json.loads(hotgauge(bin_dir, "measure", rec, "--calibration", cal, "--json"))
     again = json.loads(hotgauge(bin_dir, "measure", rec2, "--calibration", cal, "--json"))
     worst = max(compare("line's result vs measure of its archive", result["part"], offline),
@@ -183,6 +192,9 @@ def archived_part(bin_dir, workdir):
     cell_log = open(os.path.join(second, "virtual-cell.log")).read()
     print(next(l for l in cell_log.splitlines() if l.startswith("replayed ")))
     assert " 0 not " in cell_log, "profiles that did not go out exactly as peaks"
+    ahead = [l for l in cell_log.splitlines() if "its record follows the one sent before" in l]
+    assert ahead, "the face scanned again did not follow its first record"
+    print("scanned again after a lost start: " + ahead[0].split("replay: ")[1])
     bad_input(bin_dir, workdir, cal, rec)
     return worst
 

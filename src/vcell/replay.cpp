@@ -13,6 +13,15 @@
 namespace hotgauge::vcell {
 namespace {
 
+// The receiver's scan ends scan_s after its AcquisitionStart, with the frame that arrives after
+// its last look: frames 0..N−2 go out by scan_s − kEdgeS (their delivery's margin), the last at
+// scan_s + kEdgeS (the margin of the receiver's start); 0.3 s between them, less than a camera
+// timeout (hotgauged: 500 ms).
+constexpr double kEdgeS = 0.15;
+// A new record starts at least this long after the last sample sent (the receiver's ring takes
+// only samples after its newest, and its window must not reach back into the record before).
+constexpr std::int64_t kAccelGuardNs = 100'000'000;
+
 // The point the receiver makes of row word w in column u (acquire::decode_peaks, then
 // Triangulation::to_camera with the region's offsets): the same calls, so the same floats.
 void decode_point(const acquire::Triangulation& t, const PeakEncoding& e, double u, long w,
@@ -124,6 +133,7 @@ bool RecordingPlayer::start_acquisition(const FrameRequest& req, const std::stri
     acquisition_ = req.acquisition;
     face_ = nullptr;
     sent_ = 0;
+    warned_still_scanning_ = false;
     const std::string where = (c_.dir / face).string();
     const auto it = std::find_if(c_.recording.faces.begin(), c_.recording.faces.end(),
                                  [&](const core::FaceScan& f) { return f.name == face; });
@@ -159,38 +169,65 @@ void RecordingPlayer::render(FrameRequest& req, std::span<std::uint8_t> data,
     if (req.acquisition != acquisition_) start_acquisition(req, face);
     if (!face_ || sent_ >= frames_.size()) {
         req.send = false;
+        // The last frame went out kEdgeS after scan_s: a receiver scanning on after 0.5 s scans
+        // longer, and has waited in vain for a frame since.
+        const auto late_ns = static_cast<std::int64_t>((c_.scan_s + 0.5) * 1e9);
+        if (face_ && !warned_still_scanning_ &&
+            core::realtime_ns() > req.acquisition_start_ns + late_ns) {
+            warned_still_scanning_ = true;
+            detail::log().warn(
+                "replay: face {}: the receiver still scans 0.35 s after the recording's last "
+                "frame: is --scan-s {} its camera.scan_s?",
+                face, c_.scan_s);
+        }
         std::this_thread::sleep_for(std::chrono::milliseconds(5));
         return;
     }
-    // Frames 0..N−2 spread over [5 ms, scan_s − 150 ms], the last at scan_s + 100 ms: the
-    // receiver's scan ends between the two, whatever the start's latency.
+    // Frames 0..N−2 spread over [5 ms, scan_s − kEdgeS], the last at scan_s + kEdgeS.
     const std::size_t n = frames_.size();
     const auto ns = [](double s) { return static_cast<std::int64_t>(s * 1e9); };
-    const std::int64_t spread = std::max<std::int64_t>(0, ns(c_.scan_s - 0.155));
+    const std::int64_t spread = std::max<std::int64_t>(0, ns(c_.scan_s - kEdgeS - 0.005));
     const std::int64_t due =
         req.acquisition_start_ns +
         (sent_ + 1 < n ? ns(0.005) + (n > 2 ? spread * static_cast<std::int64_t>(sent_) /
                                                   static_cast<std::int64_t>(n - 2)
                                             : 0)
-                       : ns(c_.scan_s + 0.1));
+                       : ns(c_.scan_s + kEdgeS));
     while (!stop && core::realtime_ns() < due)
         std::this_thread::sleep_for(std::chrono::nanoseconds(
             std::min<std::int64_t>(20'000'000, due - core::realtime_ns())));
     const ReplayFrame& f = frames_[sent_];
-    if (sent_ == 0) {  // one shift for the frames and the accelerometer record of this scan
-        shift_ns_ = core::realtime_ns() - f.camera_ns;
-        std::lock_guard lock(mutex_);
-        if (accel_face_ && next_batch_ < batches_.size())
-            detail::log().warn("replay: face {}'s accelerometer record cut short by a new scan",
-                               accel_face_->name);
-        accel_face_ = face_;
-        batches_ = accel_batches(*face_, c_.datagram_samples);
-        next_batch_ = 0;
-        accel_shift_ns_ = shift_ns_;
-    }
+    if (sent_ == 0) start_accel(f);
     req.timestamp_ns = f.camera_ns + shift_ns_;
     encode_frame(f, req, data);
     ++sent_;
+}
+
+// One shift for the frames and the accelerometer record of this scan: the first frame is now,
+// unless the record sent before still reaches that far (the face scanned again right after, when
+// the receiver found the scan's start lost): then later, so that the new record follows it, and
+// the stream runs that much ahead of the clock.
+void RecordingPlayer::start_accel(const ReplayFrame& first) {
+    const std::int64_t now = core::realtime_ns();
+    shift_ns_ = now - first.camera_ns;
+    std::lock_guard lock(mutex_);
+    if (!face_->accel_times_ns.empty() && sent_any_)
+        shift_ns_ =
+            std::max(shift_ns_, last_sent_ns_ + kAccelGuardNs - face_->accel_times_ns.front());
+    const std::int64_t lead = shift_ns_ - (now - first.camera_ns);
+    if (accel_face_ && next_batch_ < batches_.size())
+        detail::log().info("replay: face {}'s accelerometer record cut short by a new scan",
+                           accel_face_->name);
+    if (lead > 0)
+        detail::log().info(
+            "replay: face {}: its record follows the one sent before: frames and samples {:.1f} "
+            "ms ahead of the clock",
+            face_->name, static_cast<double>(lead) * 1e-6);
+    accel_face_ = face_;
+    batches_ = accel_batches(*face_, c_.datagram_samples);
+    next_batch_ = 0;
+    accel_shift_ns_ = shift_ns_;
+    accel_lead_ns_ = lead;
 }
 
 void RecordingPlayer::encode_frame(const ReplayFrame& f, const FrameRequest& req,
@@ -222,9 +259,11 @@ std::vector<RecordingPlayer::Datagram> RecordingPlayer::due(std::int64_t now_ns)
         const AccelBatch& b = batches_[next_batch_];
         const std::int64_t t_last =
             b.t_ns + static_cast<std::int64_t>(b.count - 1) * b.period_ns + accel_shift_ns_;
-        if (t_last > now_ns) break;
+        if (t_last > now_ns + accel_lead_ns_) break;
         const float* s = accel_face_->accel_mps2.data() + b.first * 3;
         out.push_back({b.t_ns + accel_shift_ns_, b.period_ns, {s, s + b.count * 3}});
+        last_sent_ns_ = t_last;
+        sent_any_ = true;
     }
     return out;
 }

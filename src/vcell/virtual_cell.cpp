@@ -43,8 +43,9 @@ core::Result<std::shared_ptr<const LoadedPart>> build_part(const VirtualCellConf
 constexpr double kNoReadingC = 20.0;
 
 // Replay (docs/virtual-cell.md "Replay"): peaks through the receiver's calibration.
-core::Result<std::unique_ptr<RecordingPlayer>> make_player(const VirtualCellConfig& c) {
-    const ReplayConfig& r = *c.replay;
+// The recording moves into the player.
+core::Result<std::unique_ptr<RecordingPlayer>> make_player(VirtualCellConfig& c) {
+    ReplayConfig& r = *c.replay;
     if (c.mode != "peaks" || c.device.multipart_parts >= 2)
         return core::make_error(
             "virtual cell: a replay sends single-part peak frames (--mode peaks)");
@@ -52,7 +53,7 @@ core::Result<std::unique_ptr<RecordingPlayer>> make_player(const VirtualCellConf
     if (!tri) return tri.error();
     PlayerConfig pc;
     pc.dir = r.dir;
-    pc.recording = r.recording;
+    pc.recording = std::move(r.recording);
     pc.clock_offset_ns = r.calibration.clock_offset_ns;
     pc.scan_s = r.scan_s;
     pc.line_period_s = c.line_period_s;
@@ -156,13 +157,13 @@ struct VirtualCell::Impl {
         return part;
     }
 
-    // Register 7, the pyrometer and the renderer all change to `p` at once, under the lock, so
-    // that a newer request (which sets register 7 to 0 under it too) is never overtaken.
     double temperature_c() const {
-        if (config.replay) return config.replay->recording.temperature_c.value_or(kNoReadingC);
+        if (player) return player->recording().temperature_c.value_or(kNoReadingC);
         return current_part()->options.temperature_c;
     }
 
+    // Register 7, the pyrometer and the renderer all change to `p` at once, under the lock, so
+    // that a newer request (which sets register 7 to 0 under it too) is never overtaken.
     void publish(std::shared_ptr<const LoadedPart> p) {
         if (pyrometer) pyrometer->set_temperature(p->options.temperature_c);
         loaded = p->number;
@@ -179,8 +180,9 @@ struct VirtualCell::Impl {
 
 void VirtualCell::Impl::request_part(int n) {
     if (player) {  // a replay has one part, the recording's: it is there at once
+        std::lock_guard lock(part_mutex);
         loaded = n;
-        axis->set_part_loaded(n);
+        if (axis) axis->set_part_loaded(n);
         return;
     }
     {

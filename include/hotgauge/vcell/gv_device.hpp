@@ -22,7 +22,7 @@ struct FrameRequest {
     std::uint32_t frame_id = 0;             // GVSP block id, 1..65535
     std::int64_t timestamp_ns = 0;          // start of exposure; also in the GVSP leader
     std::uint64_t acquisition = 0;          // +1 at each AcquisitionStart
-    std::int64_t frame_in_acquisition = 0;  // 0 for the first frame after AcquisitionStart
+    std::int64_t frame_in_acquisition = 0;  // 0 for the first frame (render turn) after the start
     int width = 0, height = 0, offset_x = 0, offset_y = 0;
     int bytes_per_pixel = 1;
     std::uint32_t pixel_format = 0;  // PFNC code

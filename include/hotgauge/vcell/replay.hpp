@@ -83,9 +83,10 @@ struct PlayerConfig {
 };
 
 // Plays one recording: per acquisition, the frames of the face the axis is at, and the same
-// face's accelerometer record, both shifted by one offset to now (fixed at the first frame).
+// face's accelerometer record, both shifted by one offset to now (fixed at the first frame; later
+// when the record sent before still reaches that far, see start_accel).
 // Frames 0..N−2 go out within the first scan_s − 0.15 s of the acquisition and the last one
-// 0.1 s after scan_s: a receiver that scans scan_s gets exactly the N recorded frames.
+// 0.15 s after scan_s: a receiver that scans scan_s gets exactly the N recorded frames.
 // Thread safety: render() on the device's stream thread, due() on another.
 class RecordingPlayer {
   public:
@@ -107,10 +108,12 @@ class RecordingPlayer {
     };
     std::vector<Datagram> due(std::int64_t now_ns);
     EncodeStats stats() const;
+    const core::Recording& recording() const { return c_.recording; }
 
   private:
     bool start_acquisition(const FrameRequest& req, const std::string& face);
     void encode_frame(const ReplayFrame& f, const FrameRequest& req, std::span<std::uint8_t> data);
+    void start_accel(const ReplayFrame& first);
 
     PlayerConfig c_;
     acquire::Triangulation triangulation_;
@@ -120,6 +123,7 @@ class RecordingPlayer {
     std::vector<ReplayFrame> frames_;
     std::size_t sent_ = 0;
     std::int64_t shift_ns_ = 0;
+    bool warned_still_scanning_ = false;
     std::vector<std::uint16_t> words_;
     // Shared with due().
     mutable std::mutex mutex_;
@@ -127,6 +131,9 @@ class RecordingPlayer {
     std::vector<AccelBatch> batches_;
     std::size_t next_batch_ = 0;
     std::int64_t accel_shift_ns_ = 0;
+    std::int64_t accel_lead_ns_ = 0;  // samples go out this long before their time
+    std::int64_t last_sent_ns_ = 0;   // the last sample sent, shifted
+    bool sent_any_ = false;
     EncodeStats stats_;
 };
 

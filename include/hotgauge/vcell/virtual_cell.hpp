@@ -39,8 +39,8 @@ namespace hotgauge::vcell {
 // each face's recorded profiles as peak frames, the accelerometer its record, the pyrometer its
 // temperature, all shifted to now; the axis and the conveyor work as usual.
 struct ReplayConfig {
-    std::filesystem::path dir;  // for messages
-    core::Recording recording;
+    std::filesystem::path dir;       // for messages
+    core::Recording recording;       // moved into the cell at start
     calib::Calibration calibration;  // the receiver's: its triangulation and clock offset
     double scan_s = 1.3;             // the receiver's scan length (hotgauged camera.scan_s)
 };
