@@ -1,4 +1,4 @@
-#include "html.hpp"
+#include "hotgauge/report/html.hpp"
 
 #include <algorithm>
 #include <cassert>
@@ -61,7 +61,7 @@ std::string fixed(double value, int decimals, bool sign) {
     return b;
 }
 
-std::string png_data_uri(const RgbImage& image) {
+std::vector<std::uint8_t> png_bytes(const RgbImage& image) {
     assert(image.width > 0 && image.height > 0);
     // OpenCV wants BGR; the copy is the picture's size, small beside the scan behind it.
     cv::Mat bgr(image.height, image.width, CV_8UC3);
@@ -73,7 +73,11 @@ std::string png_data_uri(const RgbImage& image) {
     std::vector<std::uint8_t> png;
     [[maybe_unused]] const bool encoded = cv::imencode(".png", bgr, png);
     assert(encoded);  // an 8-bit 3-channel picture always encodes
-    return "data:image/png;base64," + base64(png);
+    return png;
+}
+
+std::string png_data_uri(const RgbImage& image) {
+    return "data:image/png;base64," + base64(png_bytes(image));
 }
 
 }  // namespace hotgauge::report

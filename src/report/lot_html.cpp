@@ -3,8 +3,8 @@
 #include <cmath>
 #include <string>
 
+#include "hotgauge/report/html.hpp"
 #include "hotgauge/report/lot_report.hpp"
-#include "html.hpp"
 
 namespace hotgauge::report {
 namespace {

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "html.hpp"
+#include "hotgauge/report/html.hpp"
 #include "pictures.hpp"
 
 namespace hotgauge::report {

@@ -128,6 +128,24 @@ RangePicture range_picture(const core::FaceScan& face) {
     return out;
 }
 
+FacePicture range_png(const core::FaceScan& face, int max_side_px) {
+    FacePicture out{face.name, 0, 0, {}};
+    if (face.n_profiles() == 0 || face.width == 0) return out;
+    const RgbImage full = range_picture(face).image;
+    const int step = std::max(
+        1, (std::max(full.width, full.height) + max_side_px - 1) / std::max(1, max_side_px));
+    RgbImage small((full.width + step - 1) / step, (full.height + step - 1) / step);
+    for (int y = 0; y < small.height; ++y)
+        for (int x = 0; x < small.width; ++x) {
+            const std::size_t at = (static_cast<std::size_t>(y) * step * full.width + x * step) * 3;
+            small.set(x, y, {full.rgb[at], full.rgb[at + 1], full.rgb[at + 2]});
+        }
+    out.width = small.width;
+    out.height = small.height;
+    out.png = png_bytes(small);
+    return out;
+}
+
 OverlayPixels overlay_pixels(const DeviationMap& m, const Overlay& o, const PartReportConfig& c,
                              double label_rad) {
     const auto n = static_cast<std::size_t>(m.profiles * m.width);

@@ -8,8 +8,8 @@
 #include <vector>
 
 #include "hotgauge/core/recording.hpp"
+#include "hotgauge/report/html.hpp"
 #include "hotgauge/report/part_report.hpp"
-#include "html.hpp"
 
 namespace hotgauge::report {
 

@@ -54,6 +54,16 @@ DeviationMap deviation_map(const core::FaceScan& face,
                            const core::AxisymmetricSolid& nominal_hot,
                            const PartReportConfig& config = {});
 
+// A face's range image (the page's first picture, grey by range), shrunk by a whole step to at
+// most `max_side_px` on its longer side (nearest pixel), as a PNG file's bytes: the daemon's
+// status page (web). A face without profiles or columns: no bytes.
+struct FacePicture {
+    std::string face;
+    int width = 0, height = 0;  // of the PNG
+    std::vector<std::uint8_t> png;
+};
+FacePicture range_png(const core::FaceScan& face, int max_side_px = 512);
+
 // The page: `result` is pipeline::run's on `rec` with `recipe`. A result without a pose (part not
 // found) gets the range images and the table, no deviation maps. Errors: a face of the result
 // missing from the recording, or a face whose compensation does not have one displacement per

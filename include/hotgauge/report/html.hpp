@@ -1,5 +1,6 @@
 #pragma once
-// Building blocks of the self-contained HTML reports (docs/results.md): text escaped for HTML,
+// Building blocks of the self-contained HTML reports (docs/results.md) and the daemon's status page
+// (web): text escaped for HTML,
 // numbers with a fixed number of decimals, pictures as PNG data: URIs (no file beside the page,
 // no network).
 #include <array>
@@ -27,6 +28,8 @@ struct RgbImage {
     }
 };
 
+// The picture as a PNG file's bytes.
+std::vector<std::uint8_t> png_bytes(const RgbImage& image);
 // "data:image/png;base64,…" of the picture, for an <img src>.
 std::string png_data_uri(const RgbImage& image);
 
