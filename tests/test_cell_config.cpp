@@ -40,6 +40,9 @@ TEST(DaemonConfig, TheExampleReads) {
     EXPECT_NEAR(c->acquisition.scan_s, 1.3, 1e-12);
     EXPECT_NEAR(c->accel_margin_s, 0.5, 1e-12);
     EXPECT_EQ(c->archive.every_nth_ok, 50);
+    EXPECT_TRUE(c->status_page.enabled);
+    EXPECT_EQ(c->status_page.bind_address, "127.0.0.1");
+    EXPECT_EQ(c->status_page.port, 8080);
     EXPECT_EQ(c->hash.size(), 16u);
     EXPECT_TRUE(std::all_of(c->hash.begin(), c->hash.end(),
                             [](char ch) { return std::isxdigit(static_cast<unsigned char>(ch)); }));
@@ -112,6 +115,38 @@ TEST(DaemonConfig, MistakesAreNamedWithFileLineAndKey) {
 
 // The geometry moved from the simulator's cell config to the calibration, the clock offset
 // with it: a config written for the old keys says where they went.
+TEST(DaemonConfig, StatusPageIsOnlyWhatTheConfigAsksFor) {
+    int line = 0;
+    auto e = error_with("  port: 8080", "  port: 80800", &line);
+    EXPECT_NE(e.find(":" + std::to_string(line) + ": status_page.port: must be in 0..65535"),
+              std::string::npos)
+        << e;
+    e = error_with("  port: 8080", "  port: 8080\n  allow_writes: true", &line);
+    EXPECT_NE(e.find("status_page"), std::string::npos) << e;
+    EXPECT_NE(e.find("allow_writes"), std::string::npos) << e;
+    e = error_with("  bind_address: 127.0.0.1        #", "  bind_address: ''        #", &line);
+    EXPECT_NE(e.find(":" + std::to_string(line) +
+                     ": status_page.bind_address: expected a non-empty string"),
+              std::string::npos)
+        << e;
+    // Without the section: no page, no port.
+    test::TempDir tmp;
+    std::ifstream in(kConfigDir + "/hotgauged.yaml");
+    std::stringstream ss;
+    ss << in.rdbuf();
+    std::string text = ss.str();
+    const auto from = text.find("status_page:"), to = text.find("plc:", from);
+    ASSERT_NE(from, std::string::npos);
+    text.erase(from, to - from);
+    std::ofstream(tmp.path / "hotgauged.yaml") << text;
+    std::filesystem::copy(kConfigDir + "/calibration.yaml", tmp.path / "calibration.yaml");
+    std::filesystem::create_directories(tmp.path / "parts");
+    std::filesystem::copy(kConfigDir + "/parts/hub-a.yaml", tmp.path / "parts/hub-a.yaml");
+    auto c = cell::read_daemon_config(tmp.path / "hotgauged.yaml");
+    ASSERT_TRUE(c.ok()) << c.error().message;
+    EXPECT_FALSE(c->status_page.enabled);
+}
+
 TEST(DaemonConfig, GeometryKeysThatMovedToTheCalibrationSaySo) {
     auto e = error_with("calibration: " + kConfigDir + "/calibration.yaml",
                         "cell: " + kConfigDir + "/cell.yaml");

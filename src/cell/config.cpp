@@ -192,16 +192,25 @@ void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a)
     }
 }
 
+void read_status_page(const YamlReader& y, const YAML::Node& p, StatusPageConfig& out) {
+    const std::string w = "status_page";
+    y.expect_map(p, w, {"enabled", "bind_address", "port"});
+    out.enabled = p["enabled"] ? y.boolean(p["enabled"], w + ".enabled") : true;
+    if (p["bind_address"]) out.bind_address = y.string(p["bind_address"], w + ".bind_address");
+    out.port = integer_in(y, p, w, "port", 0, 65535, out.port);
+}
+
 }  // namespace
 
 core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
     const YamlReader y(file.string());
     return y.guarded<DaemonConfig>([&] {
         const YAML::Node root = y.load();
-        y.expect_map(root, "hotgauged",
-                     {"calibration", "calibration_interval_days", "faces", "recipes", "models",
-                      "masters", "camera", "accelerometer", "axis", "plc", "pyrometer", "results",
-                      "cell"});  // cell: moved to the calibration, refused below by name
+        y.expect_map(
+            root, "hotgauged",
+            {"calibration", "calibration_interval_days", "faces", "recipes", "models", "masters",
+             "camera", "accelerometer", "axis", "plc", "pyrometer", "results", "status_page",
+             "cell"});  // cell: moved to the calibration, refused below by name
         DaemonConfig c;
         c.file = file;
         c.hash = file_hash(file);
@@ -334,6 +343,7 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
             c.results_min_free_mb = integer_in(y, r, w, "min_free_mb", 0, 1'000'000,
                                                static_cast<int>(c.results_min_free_mb));
         }
+        if (const YAML::Node p = root["status_page"]) read_status_page(y, p, c.status_page);
         return c;
     });
 }

@@ -16,6 +16,7 @@
 #include "hotgauge/cell/axis.hpp"
 #include "hotgauge/cell/journal.hpp"
 #include "hotgauge/cell/quality_feed.hpp"
+#include "hotgauge/cell/status_board.hpp"
 #include "hotgauge/core/clock.hpp"
 #include "hotgauge/io/certificate.hpp"
 #include "hotgauge/io/model_io.hpp"
@@ -27,6 +28,7 @@
 #include "hotgauge/plc/server.hpp"
 #include "hotgauge/results/archive.hpp"
 #include "hotgauge/results/results_log.hpp"
+#include "hotgauge/web/server.hpp"
 #include "plc_result.hpp"
 #include "queue.hpp"
 
@@ -256,6 +258,8 @@ struct Daemon::Impl {
     std::unique_ptr<accel::AccelSource> accel;
     std::unique_ptr<plc::Pyrometer> pyrometer;
     std::unique_ptr<plc::Server> server;
+    std::unique_ptr<StatusBoard> board;  // what the status page shows; any thread
+    std::unique_ptr<web::Server> web;    // the status page, when configured
 
     detail::BoundedQueue<Job> jobs{1};
     detail::BoundedQueue<Captured> captured{2};
@@ -294,6 +298,7 @@ struct Daemon::Impl {
             if (stats.state == s) return;
             stats.state = s;
         }
+        board->set_state(s);
         if (sup.status) sup.status(s);
     }
 
@@ -304,6 +309,7 @@ struct Daemon::Impl {
     void apply_reload();
     bool healthy() const;
     void shutdown();
+    void start_status_page();
 
     void acquisition_loop();
     Captured acquire_part(Job job);
@@ -406,10 +412,11 @@ void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
     if (r == setup->recipes.end()) {
         // Refused before it becomes a part: no sequence number, no row; the PLC and the
         // journal get the reason.
+        const std::string why = "part " + std::to_string(t.part_id) + ": no recipe in slot " +
+                                std::to_string(t.recipe_slot) + ": PLC fault 202";
         log_part({0, std::to_string(t.part_id), "slot " + std::to_string(t.recipe_slot), "FAULT",
-                  "part " + std::to_string(t.part_id) + ": no recipe in slot " +
-                      std::to_string(t.recipe_slot) + ": PLC fault 202",
-                  true});
+                  why, true});
+        board->event(why, true);
         server->fault(code(plc::ErrorCode::kUnknownRecipe));
         std::lock_guard lock(stats_mutex);
         ++stats.triggers;
@@ -458,6 +465,10 @@ void Daemon::Impl::apply_reload() {
     if (a.accelerometer.has_value() != b.accelerometer.has_value() ||
         (a.pyrometer.has_value() != b.pyrometer.has_value()))
         spdlog::warn("reload: accelerometer and pyrometer sources change only at a restart");
+    if (a.status_page.enabled != b.status_page.enabled ||
+        a.status_page.port != b.status_page.port ||
+        a.status_page.bind_address != b.status_page.bind_address)
+        spdlog::warn("reload: the status page's address changes only at a restart");
     setup = std::move(*next);
     spdlog::info("reloaded: config hash {}\n{}", setup->config.hash, describe(*setup));
     std::lock_guard lock(stats_mutex);
@@ -490,6 +501,30 @@ void Daemon::Impl::shutdown() {
     if (acquisition_thread.joinable()) acquisition_thread.join();
     if (processing_thread.joinable()) processing_thread.join();
     if (accel) accel->stop();
+    web.reset();  // the page shows the state up to the last part
+}
+
+// The page is a window on the cell, not part of measuring: if it cannot listen, the cell runs
+// without it and says so (log and page of faults), rather than stopping the line.
+void Daemon::Impl::start_status_page() {
+    const StatusPageConfig& sp = setup->config.status_page;
+    if (!sp.enabled) return;
+    web::ServerConfig wc;
+    wc.bind_address = sp.bind_address;
+    wc.port = sp.port;
+    wc.roots = board->roots();
+    auto started = web::Server::start(wc, [this] {
+        web::CellView v = board->view();
+        v.plc_state = plc::to_string(server->state());
+        return v;
+    });
+    if (!started) {
+        spdlog::error("{}: the cell runs without it", started.error().message);
+        board->event(started.error().message, true);
+        return;
+    }
+    web = std::move(*started);
+    spdlog::info("status page on {}", web->url());
 }
 
 // ---- acquisition ---------------------------------------------------------------------------
@@ -990,8 +1025,13 @@ void Daemon::Impl::process(Captured c) {
               verdict_field(c.fault != 0 || !stored,
                             to_plc(r, verification ? &*verification : nullptr).overall),
               msg.str(), problem});
-    // Last: the stats and the log above are the part's outcome, the day's page can wait.
-    if (quality && stored) quality->stored(results::jsonl_line(entry), t_result);
+    // Last: the stats and the log above are the part's outcome, the pages can wait.
+    PartNews news{results::jsonl_line(entry), outcome, msg.str(),   problem,
+                  web ? &c.rec : nullptr,     {},      std::nullopt};
+    if (stored) news.files = {log->last_csv(), log->last_jsonl()};
+    if (archiving) news.archived = fs::path(*entry.archived_as);
+    if (quality && stored) quality->stored(news.jsonl_line, t_result);
+    board->part(news);
 }
 
 // ---- Daemon --------------------------------------------------------------------------------
@@ -1009,6 +1049,7 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
     impl->setup = setup;
     impl->sup = std::move(supervisor);
     const DaemonConfig& c = setup->config;
+    impl->board = std::make_unique<StatusBoard>(c.results.dir, c.archive.dir);
     impl->stats.next_sequence = results::last_sequence(c.results.dir) + 1;
     if (c.accelerometer) {
         // Room for a whole part: every face, the moves and the margins, twice over.
@@ -1050,6 +1091,7 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
         spdlog::info("camera {}: opened in {} ms", c.acquisition.camera.id, took.count());
     impl->prepare_results(setup);
     if (!impl->log) spdlog::error("results: {}", impl->log_error);
+    impl->start_status_page();
     impl->acq_beat = impl->proc_beat = Impl::steady_ns();
     Impl* raw = impl.get();
     impl->acquisition_thread = std::thread([raw] { raw->acquisition_loop(); });

@@ -24,6 +24,14 @@
 namespace hotgauge::cell {
 
 // The robot or axis that takes the sensor from face to face (vcell/axis_server.hpp's map).
+// The read-only status page (docs/operations.md "Status page"). Without a status_page section
+// there is none: no port opens that the config does not name.
+struct StatusPageConfig {
+    bool enabled = false;
+    std::string bind_address = "127.0.0.1";  // loopback: this computer only
+    int port = 8080;                         // 0: an ephemeral port (tests; the log names it)
+};
+
 struct AxisConfig {
     std::string kind = "none";  // none: the sensor does not move (one face, or moved by others)
     std::string address;        // modbus: HOST:PORT
@@ -64,7 +72,8 @@ struct DaemonConfig {
     results::ArchiveConfig archive;
     QualityConfig quality;           // results.drift_baseline, .lot_report, .lot_report_every_s
     int results_min_free_mb = 1024;  // less free space on the results disk: a device fault
-    std::string hash;                // of the file's bytes: goes with every result
+    StatusPageConfig status_page;
+    std::string hash;  // of the file's bytes: goes with every result
 };
 
 // FNV-1a over each file's name and bytes and then `extra`, as 16 hex digits: a hash of
