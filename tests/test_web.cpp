@@ -114,7 +114,7 @@ TEST(WebServer, ServesThePageAndItsJson) {
     EXPECT_NE(page.body.find("data-sequence=\"7\""), std::string::npos);
     EXPECT_NE(page.body.find("&lt;b&gt;4711&lt;/b&gt;"), std::string::npos);  // escaped
     EXPECT_EQ(page.body.find("<b>4711"), std::string::npos);
-    EXPECT_NE(page.body.find("62.213 mm"), std::string::npos);
+    EXPECT_NE(page.body.find("Diameter 1 62.213 NOK: above the tolerance"), std::string::npos);
     EXPECT_NE(page.body.find("src=\"/pictures/7/top.png\""), std::string::npos);
     EXPECT_NE(page.body.find("not reported yet"), std::string::npos);  // no health yet
     EXPECT_EQ(page.body.find("<script"), std::string::npos);

@@ -14,7 +14,8 @@ h1{font-size:1.3em;margin:0 0 .5em}h2{font-size:1.1em;margin:1.2em 0 .4em}
 table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 6px;text-align:left}
 th{background:#eee}.OK{background:#c8f0c8}.NOK,.fault,.bad{background:#f6c0c0}
 .DEGRADED,.warning{background:#f8e8b0}.NOT_MEASURED,.unconfigured{background:#ddd}
-.feats td{font-size:.85em}figure{display:inline-block;margin:0 1em 0 0}
+.feature{display:inline-block;margin:1px;padding:0 4px;border:1px solid #bbb;font-size:.85em}
+figure{display:inline-block;margin:0 1em 0 0}
 img{border:1px solid #888;max-width:30em;image-rendering:pixelated}
 </style>)";
 
@@ -37,14 +38,17 @@ std::string devices_html(const CellView& v) {
     return h + "</table>";
 }
 
+// One box per feature, coloured by its verdict: name, value, and the verdict and reason
+// unless OK.
 std::string features_html(const ResultView& r) {
-    std::string h = "<table class=\"feats\">";
+    std::string h;
     for (const auto& f : r.features)
-        h += "<tr class=\"feature\" data-name=\"" + escape(f.name) + "\" data-verdict=\"" +
-             escape(f.verdict) + "\"><td>" + escape(f.name) + "</td><td>" +
-             (f.value_mm ? report::fixed(*f.value_mm, 3) + " mm" : std::string("—")) + "</td>" +
-             verdict_cell(f.verdict) + "<td>" + escape(f.reason) + "</td></tr>";
-    return h + "</table>";
+        h += "<span class=\"feature " + escape(f.verdict) + "\" data-name=\"" + escape(f.name) +
+             "\" data-verdict=\"" + escape(f.verdict) + "\">" + escape(f.name) + " " +
+             (f.value_mm ? report::fixed(*f.value_mm, 3) : std::string("—")) +
+             (f.verdict == "OK" ? "" : " " + escape(f.verdict)) +
+             (f.reason.empty() ? "" : ": " + escape(f.reason)) + "</span> ";
+    return h;
 }
 
 std::string results_html(const CellView& v) {
@@ -105,7 +109,7 @@ std::string render_status_page(const CellView& v) {
            std::to_string(v.refresh_s) + "\"><title>hotgauged: " + escape(v.state) + "</title>" +
            kStyle + "</head><body><h1>hotgauged</h1><table><tr><th>daemon</th>" +
            "<td id=\"state\">" + escape(v.state) + "</td></tr><tr><th>PLC</th><td id=\"plc\">" +
-           escape(v.plc_state) + "</td></tr></table>" + results_html(v) + pictures_html(v) +
+           escape(v.plc_state) + "</td></tr></table>" + pictures_html(v) + results_html(v) +
            devices_html(v) + events_html(v) + files_html(v) +
            "<p><a href=\"/status.json\">status.json</a> · read-only; reloads every " +
            std::to_string(v.refresh_s) + " s</p></body></html>\n";

@@ -237,6 +237,11 @@ core::Result<std::unique_ptr<Server>> Server::start(const ServerConfig& config, 
                                 std::to_string(config.port));
     Impl* raw = impl.get();
     impl->listener = std::thread([raw] { raw->http.listen_after_bind(); });
+    // httplib 0.11.4's stop() does nothing before the listener runs (it would then accept for
+    // ever): serving when start returns, so that the destructor can always stop it.
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+    while (!http.is_running() && std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
     return std::unique_ptr<Server>(new Server(std::move(impl)));
 }
 
