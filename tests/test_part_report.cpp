@@ -250,6 +250,32 @@ TEST(PartReport, WithoutAPoseHasRangeImagesAndTheReason) {
     EXPECT_EQ(count(*html, "No deviation map: part not found: best score 0.412."), faces);
 }
 
+// The status page's picture: a PNG of the range image at the whole step that fits the asked
+// side (the full image at step 1), no bytes for a face without profiles.
+TEST(RangePng, IsTheRangeImageAtAWholeStepWithinTheSide) {
+    const auto& scan = *env().sim.recording.face("top");
+    const auto full = report::range_png(scan, 1 << 20);
+    const auto small = report::range_png(scan, 100);
+    EXPECT_EQ(small.face, "top");
+    EXPECT_EQ(full.width, scan.width);
+    EXPECT_EQ(full.height, scan.n_profiles());
+    const int longer = static_cast<int>(std::max<std::int64_t>(scan.width, scan.n_profiles()));
+    const int step = (longer + 99) / 100;
+    EXPECT_EQ(small.width, (full.width + step - 1) / step);
+    EXPECT_EQ(small.height, (full.height + step - 1) / step);
+    EXPECT_LE(std::max(small.width, small.height), 100);
+    // The PNG's signature and its header's size (RFC 2083: IHDR width, height big-endian).
+    ASSERT_GT(small.png.size(), 24u);
+    EXPECT_EQ(std::string(small.png.begin() + 1, small.png.begin() + 4), "PNG");
+    const auto be32 = [&](std::size_t at) {
+        return (small.png[at] << 24) | (small.png[at + 1] << 16) | (small.png[at + 2] << 8) |
+               small.png[at + 3];
+    };
+    EXPECT_EQ(be32(16), small.width);
+    EXPECT_EQ(be32(20), small.height);
+    EXPECT_TRUE(report::range_png(core::FaceScan{}, 100).png.empty());
+}
+
 // A value beyond the drawn range sits at the band's edge as an arrow, not off the picture.
 TEST(PartReport, ValueFarOutOfToleranceIsClampedToTheEdge) {
     const auto& e = env();

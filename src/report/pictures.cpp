@@ -1,6 +1,7 @@
 #include "pictures.hpp"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -100,12 +101,13 @@ Colour deviation_colour(double deviation_mm, double scale_mm) {
     return {lerp(a[0], b[0], f), lerp(a[1], b[1], f), lerp(a[2], b[2], f)};
 }
 
-RangePicture range_picture(const core::FaceScan& face) {
+RangePicture range_picture(const core::FaceScan& face, int step) {
+    assert(step >= 1);
     const auto n = static_cast<int>(face.n_profiles()), w = static_cast<int>(face.width);
-    RangePicture out{RgbImage(w, n), 0, 0};
+    RangePicture out{RgbImage((w + step - 1) / step, (n + step - 1) / step), 0, 0};
     std::vector<float> ranges;
-    for (int k = 0; k < n; ++k)
-        for (int i = 0; i < w; ++i)
+    for (int k = 0; k < n; k += step)
+        for (int i = 0; i < w; i += step)
             if (!std::isnan(face.x(k, i)) && !std::isnan(face.z(k, i)))
                 ranges.push_back(face.z(k, i));
     if (ranges.empty()) return out;
@@ -117,13 +119,13 @@ RangePicture range_picture(const core::FaceScan& face) {
     };
     out.near_mm = percentile(0.01);
     out.far_mm = std::max(percentile(0.99), out.near_mm + 1e-3);
-    for (int k = 0; k < n; ++k)
-        for (int i = 0; i < w; ++i) {
+    for (int k = 0; k < n; k += step)
+        for (int i = 0; i < w; i += step) {
             if (std::isnan(face.x(k, i)) || std::isnan(face.z(k, i))) continue;
             const double t =
                 std::clamp((face.z(k, i) - out.near_mm) / (out.far_mm - out.near_mm), 0.0, 1.0);
             const auto g = static_cast<std::uint8_t>(std::lround(255.0 - 195.0 * t));
-            out.image.set(i, k, {g, g, g});
+            out.image.set(i / step, k / step, {g, g, g});
         }
     return out;
 }
@@ -131,18 +133,13 @@ RangePicture range_picture(const core::FaceScan& face) {
 FacePicture range_png(const core::FaceScan& face, int max_side_px) {
     FacePicture out{face.name, 0, 0, {}};
     if (face.n_profiles() == 0 || face.width == 0) return out;
-    const RgbImage full = range_picture(face).image;
-    const int step = std::max(
-        1, (std::max(full.width, full.height) + max_side_px - 1) / std::max(1, max_side_px));
-    RgbImage small((full.width + step - 1) / step, (full.height + step - 1) / step);
-    for (int y = 0; y < small.height; ++y)
-        for (int x = 0; x < small.width; ++x) {
-            const std::size_t at = (static_cast<std::size_t>(y) * step * full.width + x * step) * 3;
-            small.set(x, y, {full.rgb[at], full.rgb[at + 1], full.rgb[at + 2]});
-        }
-    out.width = small.width;
-    out.height = small.height;
-    out.png = png_bytes(small);
+    const auto longer = static_cast<int>(
+        std::max<std::int64_t>(face.width, static_cast<std::int64_t>(face.n_profiles())));
+    const int step = std::max(1, (longer + max_side_px - 1) / std::max(1, max_side_px));
+    const RgbImage image = range_picture(face, step).image;
+    out.width = image.width;
+    out.height = image.height;
+    out.png = png_bytes(image);
     return out;
 }
 

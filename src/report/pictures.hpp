@@ -32,7 +32,9 @@ struct RangePicture {
     RgbImage image;
     double near_mm = 0, far_mm = 0;  // the ranges drawn white and darkest
 };
-RangePicture range_picture(const core::FaceScan& face);
+// `step` > 1: every step-th profile and column only, a picture step times smaller each way
+// (percentiles from those points): the status page's, at a fraction of the cost.
+RangePicture range_picture(const core::FaceScan& face, int step = 1);
 
 // A measured level or edge circle of the hot part frame, to draw over a face's deviation map.
 struct Overlay {

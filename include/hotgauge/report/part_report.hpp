@@ -54,9 +54,9 @@ DeviationMap deviation_map(const core::FaceScan& face,
                            const core::AxisymmetricSolid& nominal_hot,
                            const PartReportConfig& config = {});
 
-// A face's range image (the page's first picture, grey by range), shrunk by a whole step to at
-// most `max_side_px` on its longer side (nearest pixel), as a PNG file's bytes: the daemon's
-// status page (web). A face without profiles or columns: no bytes.
+// A face's range image (the page's first picture, grey by range) from every step-th profile and
+// column, the whole step that makes it at most `max_side_px` on its longer side, as a PNG file's
+// bytes: the daemon's status page (web). A face without profiles or columns: no bytes.
 struct FacePicture {
     std::string face;
     int width = 0, height = 0;  // of the PNG
