@@ -64,6 +64,15 @@ Reply request(int port, const std::string& method, const std::string& target,
     return r;
 }
 
+// A GET that must answer 200 with this type and these bytes.
+void expect_served(int port, const std::string& target, const std::string& type,
+                   const std::string& body) {
+    const Reply r = request(port, "GET", target);
+    EXPECT_EQ(r.status, 200) << target;
+    EXPECT_EQ(r.header("content-type"), type) << target;
+    EXPECT_EQ(r.body, body) << target;
+}
+
 web::CellView sample_view() {
     web::CellView v;
     v.state = "idle: waiting for a trigger";
@@ -150,10 +159,8 @@ TEST(WebServer, RefusesEveryMethodButGetAndHead) {
 TEST(WebServer, ServesFilesUnderItsRootOnly) {
     Served s;
     ASSERT_TRUE(s.server);
-    const Reply csv = request(s.port(), "GET", "/results/2026-12-04.csv");
-    ASSERT_EQ(csv.status, 200);
-    EXPECT_EQ(csv.header("content-type"), "text/csv; charset=utf-8");
-    EXPECT_EQ(csv.body, "time,sequence\n1,7\n");
+    expect_served(s.port(), "/results/2026-12-04.csv", "text/csv; charset=utf-8",
+                  "time,sequence\n1,7\n");
     const Reply list = request(s.port(), "GET", "/results/");
     ASSERT_EQ(list.status, 200);
     EXPECT_NE(list.body.find("href=\"2026-12-04.csv\""), std::string::npos);
@@ -174,10 +181,8 @@ TEST(WebServer, ServesFilesUnderItsRootOnly) {
 TEST(WebServer, ServesTheLastPartsPicturesByItsSequence) {
     Served s;
     ASSERT_TRUE(s.server);
-    const Reply png = request(s.port(), "GET", "/pictures/7/top.png");
-    ASSERT_EQ(png.status, 200);
-    EXPECT_EQ(png.header("content-type"), "image/png");
-    EXPECT_EQ(png.body, std::string("\x89PNG\x01\x02\x03", 7));
+    expect_served(s.port(), "/pictures/7/top.png", "image/png",
+                  std::string("\x89PNG\x01\x02\x03", 7));
     EXPECT_EQ(request(s.port(), "GET", "/pictures/6/top.png").status, 404);  // another part
     EXPECT_EQ(request(s.port(), "GET", "/pictures/7/side1.png").status, 404);
 }

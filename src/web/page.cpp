@@ -16,7 +16,8 @@ th{background:#eee}.OK{background:#c8f0c8}.NOK,.fault,.bad{background:#f6c0c0}
 .DEGRADED,.warning{background:#f8e8b0}.NOT_MEASURED,.unconfigured{background:#ddd}
 .feature{display:inline-block;margin:1px;padding:0 4px;border:1px solid #bbb;font-size:.85em}
 figure{display:inline-block;margin:0 1em 0 0}
-img{border:1px solid #888;max-width:30em;image-rendering:pixelated}
+img{border:1px solid #888;max-width:16em;height:auto;image-rendering:pixelated}
+#results td:nth-child(2){white-space:nowrap}
 </style>)";
 
 std::string verdict_cell(const std::string& verdict) {
