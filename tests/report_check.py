@@ -131,9 +131,11 @@ document.getElementById('hg-probe').textContent = JSON.stringify({
 </script>"""
 
 
-def chromium(*args):
+def chromium(*args, budget_ms=3000):
+    """Headless Chromium; a page that reloads itself needs a virtual time budget below its
+    period (at a reload within the budget Chromium never returns)."""
     cmd = ["chromium", "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-           "--force-device-scale-factor=1", "--virtual-time-budget=3000", *args]
+           "--force-device-scale-factor=1", f"--virtual-time-budget={budget_ms}", *args]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=True).stdout
 
 

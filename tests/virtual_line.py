@@ -413,6 +413,7 @@ results:
   archive_dir: {self.archive_dir}
   archive_quota_gb: 4
   archive_every_nth_ok: {self.archive_every_nth_ok}
+status_page: {{bind_address: 127.0.0.1, port: 0}}
 {self.config_extra}"""
         with open(self.config_path, "w") as f:
             f.write(cfg)
@@ -438,6 +439,12 @@ results:
                                             "--config", self.config_path], self.workdir, env)
         self.procs.append(self.daemon)
         self.daemon.wait_line(r"hotgauged .* up: PLC on port", 60)
+
+    def status_url(self):
+        """The status page's URL, as the daemon logged it (an ephemeral port)."""
+        m = re.findall(r"status page on (http://\S+/)", self.daemon.text())
+        assert m, "hotgauged did not log its status page"
+        return m[-1]
 
     def stop(self):
         rcs = {}
@@ -770,6 +777,10 @@ def main():
                          "(a certificate with Diameter 3 off: fails)")
     ap.add_argument("--check-reports", action="store_true",
                     help="check the AQDEF export and the reports in Chromium (report_check.py)")
+    ap.add_argument("--check-status-page", action="store_true",
+                    help="after each part, the status page in Chromium (status_page_check.py)")
+    ap.add_argument("--status-page-screenshot", metavar="PNG",
+                    help="with --check-status-page: the last page's screenshot here")
     ap.add_argument("--check-nominal-mm", type=float,
                     help="with --commission: fail unless, with the nominal geometry, a part is not "
                          "found, a feature not measured, or one off by at least this much")
@@ -798,6 +809,11 @@ def main():
         print(f"virtual line: camera {a.address}, PLC 127.0.0.1:{line.plc_port}, "
               f"work folder {workdir}", flush=True)
         plc, conveyor = Plc(line.plc_port), Conveyor(line.axis_port)
+        page = None
+        if a.check_status_page:
+            import status_page_check
+            page = status_page_check.StatusPageCheck(line.status_url(), line.results_dir, workdir)
+            print(f"status page: {page.url}", flush=True)
         for i, (n, slot) in enumerate(runs):
             p = run_part(plc, conveyor, n, a.first_part_id + i, slot=slot)
             parts.append(p)
@@ -805,6 +821,10 @@ def main():
             print(f"{what} id {p['part_id']}: {VERDICTS.get(p['verdict'], p['verdict']) if p['state'] == DONE else 'FAULT %d' % p['error']}"
                   f" at {p['temperature_c']} °C, PLC sequence {p['sequence']}, cycle {p['cycle_s']:.1f} s",
                   flush=True)
+            if page:  # between parts: the line waits for the next trigger
+                page.after_part()
+        if page:
+            page.screenshot(a.status_page_screenshot or os.path.join(workdir, "status-page.png"))
         plc.close()
         conveyor.close()
         rcs = line.stop()
