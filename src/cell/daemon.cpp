@@ -387,6 +387,7 @@ void Daemon::Impl::update_health() {
         before = std::exchange(stats.health, h);
     }
     server->set_cell_status(cs);
+    board->set_health(h);
     for (int d = 0; d < kDeviceCount; ++d) {
         const DeviceStatus &was = before.devices[d], &is = h.devices[d];
         if (!is.configured || (before.updated_ns != 0 && was.ok == is.ok)) continue;
