@@ -391,10 +391,17 @@ void Daemon::Impl::update_health() {
     for (int d = 0; d < kDeviceCount; ++d) {
         const DeviceStatus &was = before.devices[d], &is = h.devices[d];
         if (!is.configured || (before.updated_ns != 0 && was.ok == is.ok)) continue;
-        if (!is.ok)
-            spdlog::warn("device health: {} NOT working: {}", to_string(Device(d)), is.detail);
-        else if (before.updated_ns != 0)
-            spdlog::info("device health: {} working again: {}", to_string(Device(d)), is.detail);
+        std::string what = "device health: " + std::string(to_string(Device(d)));
+        if (!is.ok) {
+            what += " NOT working: " + is.detail;
+            spdlog::warn("{}", what);
+        } else if (before.updated_ns != 0) {
+            what += " working again: " + is.detail;
+            spdlog::info("{}", what);
+        } else {
+            continue;
+        }
+        board->event(what, !is.ok);  // the status page's recent events
     }
 }
 
