@@ -1087,6 +1087,11 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
     // The camera: opened now so that the first part does not wait; if it is not there, the
     // first trigger tries again (and fails that part with the reason if it still is not).
     impl->prepare_acquisition(setup);
+    if (impl->axis) {  // its health known from the start, as the camera's
+        const auto ax = impl->axis->check();
+        impl->devices.observed(Device::kAxis, static_cast<bool>(ax),
+                               ax ? "answering" : ax.error().message, core::realtime_ns());
+    }
     const auto opening = Clock::now();
     const auto opened = impl->session->connect();
     impl->devices.observed(Device::kCamera, static_cast<bool>(opened),
