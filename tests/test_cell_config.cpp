@@ -209,7 +209,7 @@ TEST(DeviceWatch, AQuestionWithoutAnAnswerIsAFaultBeforeTheTransportGivesUp) {
     cell::DeviceWatch w;
     EXPECT_FALSE(w.status(cell::Device::kAxis, false, 0).configured);
     EXPECT_FALSE(w.status(cell::Device::kCamera, true, 0).ok);  // never asked: not known well
-    w.probe_done(cell::Device::kCamera, true, "answering", 1 * kS);
+    w.answered(cell::Device::kCamera, true, "answering");
     EXPECT_TRUE(w.status(cell::Device::kCamera, true, 1 * kS).ok);
     w.probe_started(cell::Device::kCamera, 2 * kS);
     // Pending, but not yet for longer than a healthy device takes: the last answer stands.
@@ -217,7 +217,7 @@ TEST(DeviceWatch, AQuestionWithoutAnAnswerIsAFaultBeforeTheTransportGivesUp) {
     const auto late = w.status(cell::Device::kCamera, true, 3 * kS);
     EXPECT_FALSE(late.ok);
     EXPECT_EQ(late.detail, "no answer for 1000 ms");
-    w.probe_done(cell::Device::kCamera, false, "lost", 4 * kS);
+    w.answered(cell::Device::kCamera, false, "lost");
     EXPECT_EQ(w.status(cell::Device::kCamera, true, 4 * kS).detail, "lost");
     cell::DeviceHealth h;
     h[cell::Device::kCamera] = w.status(cell::Device::kCamera, true, 4 * kS);

@@ -571,7 +571,7 @@ def check_results_files(results_dir, parts):
 def last_profile_ns(recording):
     """The newest profile time of an archived recording (recording-format-v1), ns."""
     import numpy as np
-    faces = [d for d in glob.glob(os.path.join(recording, "*", "profile_times.npy"))]
+    faces = glob.glob(os.path.join(recording, "*", "profile_times.npy"))
     assert faces, f"{recording}: no face with profile_times.npy"
     return max(int(np.load(f)[-1]) for f in faces)
 

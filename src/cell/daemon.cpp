@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <deque>
+#include <functional>
 #include <mutex>
 #include <set>
 #include <sstream>
@@ -80,10 +81,6 @@ std::vector<std::string> faces_to_scan(const Setup& s, const core::Recipe& recip
         if (needed.count(name)) out.push_back(name);
     return out;
 }
-
-}  // namespace
-
-namespace {
 
 // Setup::result_hash: per slot, the files that decide its results and the software version.
 std::map<int, std::string> result_hashes(const Setup& s) {
@@ -305,6 +302,7 @@ struct Daemon::Impl {
     void control_loop();
     void update_health();
     void probe_devices();
+    void ask(Device d, const std::function<core::Result<void>()>& question);
     void on_event(const plc::PlcEvent& ev);
     void apply_reload();
     bool healthy() const;
@@ -388,19 +386,16 @@ void Daemon::Impl::update_health() {
     }
     server->set_cell_status(cs);
     board->set_health(h);
+    const bool first = before.updated_ns == 0;  // then only what is not working is news
     for (int d = 0; d < kDeviceCount; ++d) {
         const DeviceStatus &was = before.devices[d], &is = h.devices[d];
-        if (!is.configured || (before.updated_ns != 0 && was.ok == is.ok)) continue;
-        std::string what = "device health: " + std::string(to_string(Device(d)));
-        if (!is.ok) {
-            what += " NOT working: " + is.detail;
-            spdlog::warn("{}", what);
-        } else if (before.updated_ns != 0) {
-            what += " working again: " + is.detail;
+        if (!is.configured || (first ? is.ok : was.ok == is.ok)) continue;
+        const std::string what = "device health: " + std::string(to_string(Device(d))) +
+                                 (is.ok ? " working again: " : " NOT working: ") + is.detail;
+        if (is.ok)
             spdlog::info("{}", what);
-        } else {
-            continue;
-        }
+        else
+            spdlog::warn("{}", what);
         board->event(what, !is.ok);  // the status page's recent events
     }
 }
@@ -571,15 +566,15 @@ void Daemon::Impl::probe_devices() {
     constexpr milliseconds kProbePeriod{500};
     if (Clock::now() - last_probe < kProbePeriod) return;
     last_probe = Clock::now();
-    devices.probe_started(Device::kCamera, core::realtime_ns());
-    const auto cam = session->check();
-    devices.probe_done(Device::kCamera, static_cast<bool>(cam),
-                       cam ? "answering" : cam.error().message, core::realtime_ns());
-    if (!axis) return;
-    devices.probe_started(Device::kAxis, core::realtime_ns());
-    const auto ax = axis->check();
-    devices.probe_done(Device::kAxis, static_cast<bool>(ax), ax ? "answering" : ax.error().message,
-                       core::realtime_ns());
+    ask(Device::kCamera, [this] { return session->check(); });
+    if (axis) ask(Device::kAxis, [this] { return axis->check(); });
+}
+
+// One question to device d; while it is pending the watch can tell that it takes too long.
+void Daemon::Impl::ask(Device d, const std::function<core::Result<void>()>& question) {
+    devices.probe_started(d, core::realtime_ns());
+    const auto answer = question();
+    devices.answered(d, static_cast<bool>(answer), answer ? "answering" : answer.error().message);
 }
 
 void Daemon::Impl::acquisition_loop() {
@@ -668,8 +663,8 @@ std::optional<Failure> Daemon::Impl::move_to_face(const Setup& s, const std::str
             std::this_thread::sleep_for(std::chrono::nanoseconds(t_free - core::realtime_ns()));
     }
     auto moved = axis->move_to(pos->second);
-    devices.observed(Device::kAxis, static_cast<bool>(moved),
-                     moved ? "moved to face " + name : moved.error().message, core::realtime_ns());
+    devices.answered(Device::kAxis, static_cast<bool>(moved),
+                     moved ? "moved to face " + name : moved.error().message);
     // An axis that answers but does not arrive in time is a timeout (204); one that is gone
     // or faulted is a lost device (203).
     if (!moved)
@@ -714,7 +709,7 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
         // it was still silent and the scan began 69 ms after the stream came back: degraded).
         const int reopens = session->reopens();
         if (auto ok = session->connect(); !ok) {
-            devices.observed(Device::kCamera, false, ok.error().message, core::realtime_ns());
+            devices.answered(Device::kCamera, false, ok.error().message);
             return Failure{plc::ErrorCode::kDeviceLost, "face " + name + ": " + ok.error().message};
         }
         if (session->reopens() != reopens)
@@ -723,8 +718,8 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
         if (accel) await_accel_history(margin_s);
         auto out = session->scan(s.config.acquisition.scan_s, exposure_temperature);
         acq_beat = steady_ns();
-        devices.observed(Device::kCamera, static_cast<bool>(out),
-                         out ? "scanned face " + name : out.error().message, core::realtime_ns());
+        devices.answered(Device::kCamera, static_cast<bool>(out),
+                         out ? "scanned face " + name : out.error().message);
         if (!out)
             return Failure{plc::ErrorCode::kDeviceLost,
                            "face " + name + ": " + out.error().message};
@@ -1087,18 +1082,15 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
     // The camera: opened now so that the first part does not wait; if it is not there, the
     // first trigger tries again (and fails that part with the reason if it still is not).
     impl->prepare_acquisition(setup);
-    if (impl->axis) {  // its health known from the start, as the camera's
-        const auto ax = impl->axis->check();
-        impl->devices.observed(Device::kAxis, static_cast<bool>(ax),
-                               ax ? "answering" : ax.error().message, core::realtime_ns());
-    }
+    if (impl->axis)  // its health known from the start, as the camera's
+        impl->ask(Device::kAxis, [raw = impl.get()] { return raw->axis->check(); });
     const auto opening = Clock::now();
     const auto opened = impl->session->connect();
-    impl->devices.observed(Device::kCamera, static_cast<bool>(opened),
-                           opened ? "opened" : opened.error().message, core::realtime_ns());
-    if (const auto& ok = opened; !ok)
+    impl->devices.answered(Device::kCamera, static_cast<bool>(opened),
+                           opened ? "opened" : opened.error().message);
+    if (!opened)
         spdlog::warn("camera {}: {} (retried at the first trigger)", c.acquisition.camera.id,
-                     ok.error().message);
+                     opened.error().message);
     else if (const auto took = std::chrono::duration_cast<milliseconds>(Clock::now() - opening);
              took > milliseconds(500))  // after a crash: the old control channel had to expire
         spdlog::info("camera {}: opened in {} ms", c.acquisition.camera.id, took.count());

@@ -18,7 +18,7 @@ void DeviceWatch::probe_started(Device d, std::int64_t now_ns) {
     probes_[static_cast<int>(d)].asked_ns = now_ns;
 }
 
-void DeviceWatch::probe_done(Device d, bool ok, std::string detail, std::int64_t) {
+void DeviceWatch::answered(Device d, bool ok, std::string detail) {
     std::lock_guard lock(mutex_);
     Probe& p = probes_[static_cast<int>(d)];
     p.asked_ns.reset();

@@ -1,7 +1,7 @@
 #pragma once
 // How the daemon keeps cell::DeviceHealth current in every state (docs/operations.md "Device
 // health"). The camera and the axis belong to the acquisition thread, which asks them between
-// parts (probe_started / probe_done); a question without an answer for kNoAnswer counts as a
+// parts (probe_started / answered); a question without an answer for kNoAnswer counts as a
 // fault at once, before the transport's own retries give up. The accelerometer, the pyrometer
 // and the results disk are read where they are.
 #include <chrono>
@@ -23,13 +23,10 @@ class DeviceWatch {
     // A healthy camera or axis answers a register read on the cell network in milliseconds.
     static constexpr std::int64_t kNoAnswerNs = 600'000'000;
 
-    // Acquisition thread: asking device d (the camera or the axis), and its answer.
+    // Acquisition thread: asking device d (the camera or the axis), and its answer; a part's
+    // scan or move that succeeded or failed is an answer as good as a probe's.
     void probe_started(Device d, std::int64_t now_ns);
-    void probe_done(Device d, bool ok, std::string detail, std::int64_t now_ns);
-    // A part's scan (or move) succeeded or failed: as good as a probe.
-    void observed(Device d, bool ok, std::string detail, std::int64_t now_ns) {
-        probe_done(d, ok, std::move(detail), now_ns);
-    }
+    void answered(Device d, bool ok, std::string detail);
     // The last answer, or "no answer for N ms" while a question is pending too long.
     DeviceStatus status(Device d, bool configured, std::int64_t now_ns) const;
 
