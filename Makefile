@@ -19,7 +19,9 @@ DEB_PACKAGES := build-essential cmake pkg-config clang-format \
   libyaml-cpp-dev libspdlog-dev libcli11-dev nlohmann-json3-dev libembree-dev libboost-dev \
   libgtest-dev libgmock-dev libbenchmark-dev \
   python3-numpy python3-yaml python3-pymodbus python3-serial-asyncio \
-  chromium python3-pil libcpp-httplib-dev
+  chromium python3-pil libcpp-httplib-dev \
+  libmosquitto-dev mosquitto mosquitto-clients python3-paho-mqtt python3-prometheus-client \
+  python3-jsonschema
 # Only for make fuzz / fuzz-brief (libFuzzer needs clang).
 FUZZ_PACKAGES := clang-14 libfuzzer-14-dev
 # Only for make oracle-refs: the oracles whose answers are kept in data/oracle.
