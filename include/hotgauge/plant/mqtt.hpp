@@ -62,7 +62,8 @@ class Publisher {
     // password file that is missing), naming the file.
     static core::Result<std::unique_ptr<Publisher>> start(const MqttConfig& config);
     // Stops the thread within about a second: it never waits for the broker to come back;
-    // spooled results stay for the next start.
+    // spooled results stay for the next start. When connected, the state is set to the last
+    // will's {"state":"offline"} first (a clean DISCONNECT sends no will).
     ~Publisher();
     Publisher(const Publisher&) = delete;
     Publisher& operator=(const Publisher&) = delete;

@@ -33,8 +33,8 @@ struct SpoolConfig {
 struct SpoolState {
     std::uint64_t depth = 0;  // messages waiting for the broker's acknowledgement
     std::uint64_t bytes = 0;  // their size
-    std::uint64_t refused =
-        0;              // appends refused since open(): the spool was full, or a write failed
+    // Appends refused since open(): the spool was full, a write failed, or not one line.
+    std::uint64_t refused = 0;
     bool full = false;  // the last append was refused for want of room
     std::string error;  // the last write error, "" after a good append
 };
