@@ -43,6 +43,10 @@ TEST(DaemonConfig, TheExampleReads) {
     EXPECT_TRUE(c->status_page.enabled);
     EXPECT_EQ(c->status_page.bind_address, "127.0.0.1");
     EXPECT_EQ(c->status_page.port, 8080);
+    EXPECT_TRUE(c->metrics.enabled);
+    EXPECT_EQ(c->metrics.bind_address, "127.0.0.1");
+    EXPECT_EQ(c->metrics.port, 9464);
+    EXPECT_FALSE(c->mqtt);  // commented out: no broker in the example
     EXPECT_EQ(c->hash.size(), 16u);
     EXPECT_TRUE(std::all_of(c->hash.begin(), c->hash.end(),
                             [](char ch) { return std::isxdigit(static_cast<unsigned char>(ch)); }));
@@ -145,6 +149,34 @@ TEST(DaemonConfig, StatusPageIsOnlyWhatTheConfigAsksFor) {
     auto c = cell::read_daemon_config(tmp.path / "hotgauged.yaml");
     ASSERT_TRUE(c.ok()) << c.error().message;
     EXPECT_FALSE(c->status_page.enabled);
+}
+
+TEST(DaemonConfig, MqttSettingsAreCheckedBeforeTheBrokerIsTried) {
+    const std::string ca = kConfigDir + "/calibration.yaml";  // any file that exists
+    const std::string good = "mqtt:\n  host: 127.0.0.1\n  site: plant-1\n  cell: line-3\n";
+    EXPECT_EQ(error_with("", good), "");
+    EXPECT_EQ(
+        error_with("", good + "  username: u\n  password_file: " + ca + "\n  tls: {ca_file: " + ca +
+                           ", cert_file: " + ca + ", key_file: " + ca + "}\n  spool_max_mb: 16"),
+        "");
+    auto e = error_with("", "mqtt:\n  host: 127.0.0.1\n  site: plant/1\n  cell: line-3");
+    EXPECT_NE(e.find("mqtt.site: a topic level: not empty, without '/', '+' or '#'"),
+              std::string::npos)
+        << e;
+    e = error_with("", "mqtt:\n  host: 127.0.0.1\n  site: plant-1");
+    EXPECT_NE(e.find("cell"), std::string::npos) << e;
+    e = error_with("", good + "  username: u\n  password_file: /nonexistent/pw");
+    EXPECT_NE(e.find("mqtt.password_file: /nonexistent/pw does not exist"), std::string::npos) << e;
+    e = error_with("", good + "  password_file: " + ca);
+    EXPECT_NE(e.find("mqtt.password_file: needs a username"), std::string::npos) << e;
+    e = error_with("", good + "  tls: {ca_file: " + ca + ", cert_file: " + ca + "}");
+    EXPECT_NE(e.find("mqtt.tls: a client certificate needs both cert_file and key_file"),
+              std::string::npos)
+        << e;
+    e = error_with("", good + "  password: in-the-config");  // not a key: the password_file is
+    EXPECT_NE(e.find("password"), std::string::npos) << e;
+    e = error_with("", good + "  retry_min_s: 10\n  retry_max_s: 5");
+    EXPECT_NE(e.find("mqtt.retry_max_s: less than retry_min_s"), std::string::npos) << e;
 }
 
 TEST(DaemonConfig, GeometryKeysThatMovedToTheCalibrationSaySo) {

@@ -459,13 +459,13 @@ status_page: {{bind_address: 127.0.0.1, port: 0}}
         return {f["name"]: f["cold_mm"] for f in t["features"]}
 
 
-def run_part(plc, conveyor, n, part_id, timeout=90, slot=1):
+def run_part(plc, conveyor, n, part_id, timeout=90, slot=1, face=0):
     """One part through the line; returns what the PLC read and how long the cycle took."""
     if conveyor:
         conveyor.load(n)
     plc.to_idle()
     t0 = time.monotonic()
-    plc.trigger(part_id, slot=slot)
+    plc.trigger(part_id, slot=slot, face=face)
     # Polled fast, to time the scan phase: the wall clock of the first read that saw 2.
     scans_done_ns, deadline = None, t0 + timeout
     while True:

@@ -192,12 +192,63 @@ void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a)
     }
 }
 
-void read_status_page(const YamlReader& y, const YAML::Node& p, StatusPageConfig& out) {
-    const std::string w = "status_page";
+void read_endpoint(const YamlReader& y, const YAML::Node& p, const std::string& w,
+                   HttpEndpointConfig& out) {
     y.expect_map(p, w, {"enabled", "bind_address", "port"});
     out.enabled = p["enabled"] ? y.boolean(p["enabled"], w + ".enabled") : true;
     if (p["bind_address"]) out.bind_address = y.string(p["bind_address"], w + ".bind_address");
     out.port = integer_in(y, p, w, "port", 0, 65535, out.port);
+}
+
+// A topic level: not empty, and none of MQTT's separators or wildcards.
+std::string topic_level(const YamlReader& y, const YAML::Node& m, const char* key) {
+    const std::string v = y.string(y.require(m, "mqtt", key), std::string("mqtt.") + key);
+    if (v.empty() || v.find_first_of("/+#") != std::string::npos)
+        y.fail(m[key],
+               std::string("mqtt.") + key + ": a topic level: not empty, without '/', '+' or '#'");
+    return v;
+}
+
+void read_mqtt_tls(const YamlReader& y, const YAML::Node& t, const fs::path& base,
+                   plant::MqttTls& out) {
+    const std::string w = "mqtt.tls";
+    y.expect_map(t, w, {"ca_file", "cert_file", "key_file"});
+    out.ca_file = existing(y, y.require(t, w, "ca_file"), w + ".ca_file", base);
+    if (t["cert_file"].IsDefined() != t["key_file"].IsDefined())
+        y.fail(t, w + ": a client certificate needs both cert_file and key_file");
+    if (t["cert_file"]) out.cert_file = existing(y, t["cert_file"], w + ".cert_file", base);
+    if (t["key_file"]) out.key_file = existing(y, t["key_file"], w + ".key_file", base);
+}
+
+plant::MqttConfig read_mqtt(const YamlReader& y, const YAML::Node& m, const fs::path& base,
+                            const fs::path& results_dir) {
+    const std::string w = "mqtt";
+    y.expect_map(m, w,
+                 {"host", "port", "site", "cell", "client_id", "username", "password_file", "tls",
+                  "keepalive_s", "retry_min_s", "retry_max_s", "spool_dir", "spool_max_mb"});
+    plant::MqttConfig c;
+    c.enabled = true;
+    c.host = y.string(y.require(m, w, "host"), w + ".host");
+    c.port = integer_in(y, m, w, "port", 1, 65535, m["tls"] ? 8883 : 1883);
+    c.site = topic_level(y, m, "site");
+    c.cell = topic_level(y, m, "cell");
+    if (m["client_id"]) c.client_id = y.string(m["client_id"], w + ".client_id");
+    if (m["username"]) c.username = y.string(m["username"], w + ".username");
+    if (m["password_file"]) {
+        if (c.username.empty()) y.fail(m["password_file"], w + ".password_file: needs a username");
+        c.password_file = existing(y, m["password_file"], w + ".password_file", base);
+    }
+    if (const YAML::Node t = m["tls"]) read_mqtt_tls(y, t, base, c.tls);
+    c.keepalive_s = integer_in(y, m, w, "keepalive_s", 5, 3600, c.keepalive_s);
+    c.retry_min_s = positive(y, m, w, "retry_min_s", c.retry_min_s);
+    c.retry_max_s = positive(y, m, w, "retry_max_s", c.retry_max_s);
+    if (c.retry_max_s < c.retry_min_s)
+        y.fail(m["retry_max_s"] ? m["retry_max_s"] : m, w + ".retry_max_s: less than retry_min_s");
+    c.spool.dir = m["spool_dir"] ? base / y.string(m["spool_dir"], w + ".spool_dir")
+                                 : results_dir / "mqtt-spool";
+    c.spool.max_bytes =
+        static_cast<std::uint64_t>(integer_in(y, m, w, "spool_max_mb", 1, 1'000'000, 256)) << 20;
+    return c;
 }
 
 }  // namespace
@@ -210,7 +261,7 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
             root, "hotgauged",
             {"calibration", "calibration_interval_days", "faces", "recipes", "models", "masters",
              "camera", "accelerometer", "axis", "plc", "pyrometer", "results", "status_page",
-             "cell"});  // cell: moved to the calibration, refused below by name
+             "metrics", "mqtt", "cell"});  // cell: moved to the calibration, refused below by name
         DaemonConfig c;
         c.file = file;
         c.hash = file_hash(file);
@@ -343,7 +394,10 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
             c.results_min_free_mb = integer_in(y, r, w, "min_free_mb", 0, 1'000'000,
                                                static_cast<int>(c.results_min_free_mb));
         }
-        if (const YAML::Node p = root["status_page"]) read_status_page(y, p, c.status_page);
+        if (const YAML::Node p = root["status_page"])
+            read_endpoint(y, p, "status_page", c.status_page);
+        if (const YAML::Node p = root["metrics"]) read_endpoint(y, p, "metrics", c.metrics);
+        if (const YAML::Node m = root["mqtt"]) c.mqtt = read_mqtt(y, m, base, c.results.dir);
         return c;
     });
 }

@@ -30,6 +30,7 @@
 #include "hotgauge/results/archive.hpp"
 #include "hotgauge/results/results_log.hpp"
 #include "hotgauge/web/server.hpp"
+#include "plant_feed.hpp"
 #include "plc_result.hpp"
 #include "queue.hpp"
 
@@ -257,6 +258,7 @@ struct Daemon::Impl {
     std::unique_ptr<plc::Server> server;
     std::unique_ptr<StatusBoard> board;  // what the status page shows; any thread
     std::unique_ptr<web::Server> web;    // the status page, when configured
+    std::unique_ptr<PlantFeed> plant;    // MQTT and metrics; any thread
 
     detail::BoundedQueue<Job> jobs{1};
     detail::BoundedQueue<Captured> captured{2};
@@ -296,6 +298,7 @@ struct Daemon::Impl {
             stats.state = s;
         }
         board->set_state(s);
+        plant->state(s);
         if (sup.status) sup.status(s);
     }
 
@@ -333,10 +336,27 @@ struct Daemon::Impl {
     std::string publish(const Captured& c, const results::ResultEntry& entry,
                         const core::Result<void>& stored, bool& problem);
     void prepare_results(const std::shared_ptr<const Setup>& s);
-    void finish_failed(Captured& c, pipeline::PartResult& r);
+    PartMetrics part_metrics(const Captured& c, const pipeline::PartResult& r, bool stored) const;
 };
 
 // ---- control -------------------------------------------------------------------------------
+
+namespace {
+
+// What PlantFeed was started with, to tell a reload that changes it (it needs a restart).
+std::string plant_settings(const DaemonConfig& c) {
+    std::string s = c.metrics.bind_address + ":" + std::to_string(c.metrics.port) +
+                    (c.metrics.enabled ? "+" : "-");
+    if (const auto& m = c.mqtt)
+        s += "|" + m->host + ":" + std::to_string(m->port) + "/" + m->site + "/" + m->cell + "/" +
+             m->client_id + "/" + m->username + "/" + m->password_file.string() + "/" +
+             m->tls.ca_file.string() + "/" + m->tls.cert_file.string() + "/" +
+             m->spool.dir.string() + "/" + std::to_string(m->spool.max_bytes) + "/" +
+             std::to_string(m->keepalive_s);
+    return s;
+}
+
+}  // namespace
 
 void Daemon::Impl::control_loop() {
     set_state("idle: waiting for a trigger");
@@ -374,6 +394,7 @@ void Daemon::Impl::update_health() {
     }
     h[Device::kResultsDisk] =
         disk_status(s.config.results.dir, s.config.results_min_free_mb, last_store_error);
+    h[Device::kPlantLink] = plant->link_status();
     plc::CellStatus cs = calibration_status(s.calibration.calibrated_at, s.calibration.measured(),
                                             s.config.calibration_interval_days, now);
     cs.device_faults = h.fault_bits();
@@ -386,6 +407,7 @@ void Daemon::Impl::update_health() {
     }
     server->set_cell_status(cs);
     board->set_health(h);
+    plant->health(h);
     const bool first = before.updated_ns == 0;  // then only what is not working is news
     for (int d = 0; d < kDeviceCount; ++d) {
         const DeviceStatus &was = before.devices[d], &is = h.devices[d];
@@ -421,6 +443,7 @@ void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
                   why, true});
         board->event(why, true);
         server->fault(code(plc::ErrorCode::kUnknownRecipe));
+        plant->refused(code(plc::ErrorCode::kUnknownRecipe));
         std::lock_guard lock(stats_mutex);
         ++stats.triggers;
         ++stats.failed;
@@ -472,6 +495,8 @@ void Daemon::Impl::apply_reload() {
         a.status_page.port != b.status_page.port ||
         a.status_page.bind_address != b.status_page.bind_address)
         spdlog::warn("reload: the status page's address changes only at a restart");
+    if (plant_settings(a) != plant_settings(b))
+        spdlog::warn("reload: the MQTT broker and the metrics endpoint change only at a restart");
     setup = std::move(*next);
     spdlog::info("reloaded: config hash {}\n{}", setup->config.hash, describe(*setup));
     std::lock_guard lock(stats_mutex);
@@ -504,13 +529,14 @@ void Daemon::Impl::shutdown() {
     if (acquisition_thread.joinable()) acquisition_thread.join();
     if (processing_thread.joinable()) processing_thread.join();
     if (accel) accel->stop();
-    web.reset();  // the page shows the state up to the last part
+    web.reset();    // the page shows the state up to the last part
+    plant.reset();  // the broker is told "offline"; what is spooled stays for the next start
 }
 
 // The page is a window on the cell, not part of measuring: if it cannot listen, the cell runs
 // without it and says so (log and page of faults), rather than stopping the line.
 void Daemon::Impl::start_status_page() {
-    const StatusPageConfig& sp = setup->config.status_page;
+    const HttpEndpointConfig& sp = setup->config.status_page;
     if (!sp.enabled) return;
     web::ServerConfig wc;
     wc.bind_address = sp.bind_address;
@@ -723,6 +749,7 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
         if (!out)
             return Failure{plc::ErrorCode::kDeviceLost,
                            "face " + name + ": " + out.error().message};
+        plant->scanned(*out);
         if (out->start_lost.empty()) {
             out->face.travel_scale =
                 face->travel_scale;  // applied above: a recalibration replaces it
@@ -936,6 +963,18 @@ std::string Daemon::Impl::publish(const Captured& c, const results::ResultEntry&
     return verdict_text(r, check);
 }
 
+PartMetrics Daemon::Impl::part_metrics(const Captured& c, const pipeline::PartResult& r,
+                                       bool stored) const {
+    PartMetrics m;
+    if (stored) m.verdict = measure::to_string(r.measurement.verdict);
+    m.fault = !stored ? code(plc::ErrorCode::kNotStored) : c.fault;
+    if (c.scanned != Clock::time_point{})
+        m.scan_s = std::chrono::duration<double>(c.scanned - c.job.triggered).count();
+    m.cycle_s = std::chrono::duration<double>(Clock::now() - c.job.triggered).count();
+    m.stage_ms = r.stage_ms;
+    return m;
+}
+
 void Daemon::Impl::process(Captured c) {
     const Job& job = c.job;
     prepare_results(job.setup);
@@ -1034,6 +1073,8 @@ void Daemon::Impl::process(Captured c) {
     if (stored) news.files = {log->last_csv(), log->last_jsonl()};
     if (archiving) news.archived = fs::path(*entry.archived_as);
     if (quality && stored) quality->stored(news.jsonl_line, t_result);
+    plant->result(news.jsonl_line, job.sequence);
+    plant->part(part_metrics(c, r, static_cast<bool>(stored)));
     board->part(news);
 }
 
@@ -1097,6 +1138,7 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
     impl->prepare_results(setup);
     if (!impl->log) spdlog::error("results: {}", impl->log_error);
     impl->start_status_page();
+    impl->plant = std::make_unique<PlantFeed>(c, impl->ring.get());
     impl->acq_beat = impl->proc_beat = Impl::steady_ns();
     Impl* raw = impl.get();
     impl->acquisition_thread = std::thread([raw] { raw->acquisition_loop(); });

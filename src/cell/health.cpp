@@ -14,6 +14,8 @@ const char* to_string(Device d) {
             return "axis";
         case Device::kResultsDisk:
             return "results disk";
+        case Device::kPlantLink:
+            return "plant link";
     }
     return "?";
 }

@@ -97,6 +97,11 @@ void Metrics::add(const std::string& name, const Labels& labels, double by) {
 
 void Metrics::set(const std::string& name, const Labels& labels, double value) {
     std::lock_guard lock(mutex_);
+    for (auto& f : families_)
+        if (f.name == name && f.type == MetricType::kCounter) {
+            f.series[labels].value = value;
+            return;
+        }
     family(name, MetricType::kGauge).series[labels].value = value;
 }
 

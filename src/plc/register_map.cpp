@@ -189,7 +189,7 @@ const std::vector<Row>& cell_rows() {
          "0 no cycle, 1 scanning: the part must stay, 2 scans done: the part may move; live"},
         {ir::kDeviceHealth, 1, "uint16", "device health",
          "a bit per device not working: 0 camera, 1 accelerometer, 2 pyrometer, 3 axis, "
-         "4 results disk; 0 all well; live"},
+         "4 results disk, 5 plant link (MQTT); 0 all well; live"},
         {ir::kReasons, 1, "uint16", "reasons",
          "reason bits of the result (below), 0 when OK or no result"},
         {ir::kResultTime, 2, "uint32", "result time",

@@ -166,15 +166,19 @@ std::string content_type(const fs::path& file) {
 
 struct Server::Impl {
     ServerConfig config;
-    ViewSource view;
+    ViewSource view;     // the status page's
+    TextSource metrics;  // or the metrics endpoint's
     httplib::Server http;
     std::thread listener;
     int port = 0;
 
+    void read_only();
     void routes();
+    static core::Result<std::unique_ptr<Server>> listen(std::unique_ptr<Impl> impl,
+                                                        const std::string& what);
 };
 
-void Server::Impl::routes() {
+void Server::Impl::read_only() {
     http.set_pre_routing_handler([](const httplib::Request& req, httplib::Response& res) {
         res.set_header("X-Content-Type-Options", "nosniff");
         res.set_header("Content-Security-Policy", kPolicy);
@@ -184,6 +188,10 @@ void Server::Impl::routes() {
         res.set_header("Allow", "GET, HEAD");
         return httplib::Server::HandlerResponse::Handled;
     });
+}
+
+void Server::Impl::routes() {
+    read_only();
     http.Get("/", [this](const httplib::Request&, httplib::Response& res) {
         res.set_header("Cache-Control", "no-cache");
         res.set_content(render_status_page(view()), "text/html; charset=utf-8");
@@ -214,6 +222,26 @@ core::Result<std::unique_ptr<Server>> Server::start(const ServerConfig& config, 
     auto impl = std::make_unique<Impl>();
     impl->config = config;
     impl->view = std::move(view);
+    impl->routes();
+    return Impl::listen(std::move(impl), "status page");
+}
+
+core::Result<std::unique_ptr<Server>> Server::start_metrics(const ServerConfig& config,
+                                                            TextSource metrics) {
+    auto impl = std::make_unique<Impl>();
+    impl->config = config;
+    impl->metrics = std::move(metrics);
+    impl->read_only();
+    impl->http.Get("/metrics", [raw = impl.get()](const httplib::Request&, httplib::Response& res) {
+        res.set_header("Cache-Control", "no-cache");
+        res.set_content(raw->metrics(), "text/plain; version=0.0.4; charset=utf-8");
+    });
+    return Impl::listen(std::move(impl), "metrics endpoint");
+}
+
+core::Result<std::unique_ptr<Server>> Server::Impl::listen(std::unique_ptr<Impl> impl,
+                                                           const std::string& what) {
+    const ServerConfig& config = impl->config;
     auto& http = impl->http;
     http.new_task_queue = [c = config] { return new BoundedPool(c.threads, c.queue); };
     const auto timeout = std::chrono::milliseconds(config.read_timeout_ms);
@@ -228,12 +256,11 @@ core::Result<std::unique_ptr<Server>> Server::start(const ServerConfig& config, 
         int yes = 1;
         ::setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
     });
-    impl->routes();
     impl->port = config.port == 0 ? http.bind_to_any_port(config.bind_address)
                  : http.bind_to_port(config.bind_address, config.port) ? config.port
                                                                        : -1;
     if (impl->port < 0)
-        return core::make_error("status page: cannot listen on " + config.bind_address + ":" +
+        return core::make_error(what + ": cannot listen on " + config.bind_address + ":" +
                                 std::to_string(config.port));
     Impl* raw = impl.get();
     impl->listener = std::thread([raw] { raw->http.listen_after_bind(); });

@@ -16,6 +16,7 @@
 #include "hotgauge/acquire/session.hpp"
 #include "hotgauge/cell/quality_feed.hpp"
 #include "hotgauge/core/result.hpp"
+#include "hotgauge/plant/mqtt.hpp"
 #include "hotgauge/plc/pyrometer.hpp"
 #include "hotgauge/plc/server.hpp"
 #include "hotgauge/results/archive.hpp"
@@ -23,15 +24,16 @@
 
 namespace hotgauge::cell {
 
-// The robot or axis that takes the sensor from face to face (vcell/axis_server.hpp's map).
-// The read-only status page (docs/operations.md "Status page"). Without a status_page section
-// there is none: no port opens that the config does not name.
-struct StatusPageConfig {
+// A read-only HTTP endpoint: the status page (docs/operations.md "Status page") or the metrics
+// (docs/plant-data.md "Metrics"). Without its section there is none: no port opens that the
+// config does not name.
+struct HttpEndpointConfig {
     bool enabled = false;
     std::string bind_address = "127.0.0.1";  // loopback: this computer only
     int port = 8080;                         // 0: an ephemeral port (tests; the log names it)
 };
 
+// The robot or axis that takes the sensor from face to face (vcell/axis_server.hpp's map).
 struct AxisConfig {
     std::string kind = "none";  // none: the sensor does not move (one face, or moved by others)
     std::string address;        // modbus: HOST:PORT
@@ -72,7 +74,11 @@ struct DaemonConfig {
     results::ArchiveConfig archive;
     QualityConfig quality;           // results.drift_baseline, .lot_report, .lot_report_every_s
     int results_min_free_mb = 1024;  // less free space on the results disk: a device fault
-    StatusPageConfig status_page;
+    HttpEndpointConfig status_page;
+    HttpEndpointConfig metrics{false, "127.0.0.1", 9464};
+    // The plant's MQTT broker (docs/plant-data.md); absent: results leave only through the PLC
+    // and the files.
+    std::optional<plant::MqttConfig> mqtt;
     std::string hash;  // of the file's bytes: goes with every result
 };
 

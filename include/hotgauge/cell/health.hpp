@@ -8,8 +8,17 @@
 
 namespace hotgauge::cell {
 
-enum class Device : int { kCamera = 0, kAccelerometer, kPyrometer, kAxis, kResultsDisk };
-inline constexpr int kDeviceCount = 5;
+// kPlantLink: the MQTT broker and the spool (docs/plant-data.md): not working while the broker
+// cannot be reached (results wait in the spool) or the spool refuses results.
+enum class Device : int {
+    kCamera = 0,
+    kAccelerometer,
+    kPyrometer,
+    kAxis,
+    kResultsDisk,
+    kPlantLink
+};
+inline constexpr int kDeviceCount = 6;
 const char* to_string(Device d);  // "camera", "accelerometer", ...
 
 struct DeviceStatus {

@@ -21,8 +21,9 @@ class Metrics {
     // error, not an input.
     void declare(const std::string& name, MetricType type, const std::string& help,
                  std::vector<double> buckets = {});
-    void add(const std::string& name, const Labels& labels, double by = 1.0);   // counter
-    void set(const std::string& name, const Labels& labels, double value);      // gauge
+    void add(const std::string& name, const Labels& labels, double by = 1.0);  // counter
+    // A gauge; or a counter kept elsewhere (a device's own count), copied at a scrape.
+    void set(const std::string& name, const Labels& labels, double value);
     void observe(const std::string& name, const Labels& labels, double value);  // histogram
     // The exposition: families in declaration order, series in label order.
     std::string text() const;

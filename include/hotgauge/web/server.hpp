@@ -1,7 +1,8 @@
 #pragma once
-// The daemon's status page server (docs/operations.md "Status page"): read-only HTTP on a
-// configured address (loopback unless configured otherwise). GET and HEAD only, every other
-// method 405; no write action of any kind.
+// The daemon's status page server (docs/operations.md "Status page") and its metrics endpoint
+// for plant IT (docs/plant-data.md "Metrics"): read-only HTTP on a configured address (loopback
+// unless configured otherwise). GET and HEAD only, every other method 405; no write action of
+// any kind.
 //   /              the page (render_status_page), /status.json the same for machines
 //   /pictures/<sequence>/<face>.png   the last part's range images
 //   /<root>/...    files under the configured folders (results, archive), read-only: a path with
@@ -40,8 +41,13 @@ std::string content_type(const std::filesystem::path& file);
 class Server {
   public:
     using ViewSource = std::function<CellView()>;
+    using TextSource = std::function<std::string()>;
     // Binds and starts serving; the error names the address when it cannot be bound.
     static core::Result<std::unique_ptr<Server>> start(const ServerConfig& config, ViewSource view);
+    // The metrics endpoint (docs/plant-data.md "Metrics"): GET /metrics answers the source's
+    // Prometheus text, every other path 404, with the same read-only rules and limits.
+    static core::Result<std::unique_ptr<Server>> start_metrics(const ServerConfig& config,
+                                                               TextSource metrics);
     ~Server();  // stops and joins: no request is served after it returns
     Server(const Server&) = delete;
     Server& operator=(const Server&) = delete;
