@@ -4,7 +4,8 @@ loopback (TLS and password on), a subscriber (paho-mqtt) and the metrics endpoin
 
     /usr/bin/python3 plant_data_test.py BUILD [--outage-parts 30] [--out DIR]
 
-1. A wrong password: hotgauged logs the broker's refusal and tries again with a growing delay,
+1. A CA that did not sign the broker's certificate: hotgauged logs the failed handshake and tries
+   again. A wrong password: hotgauged logs the broker's refusal and tries again with a growing delay,
    and measures a part all the same (its result waits in the spool). Restarted with the right
    password, that result is the first to reach the subscriber.
 2. Full parts and one-face parts with the broker up: each result arrives.
@@ -141,12 +142,12 @@ class Subscriber:
         self.client.disconnect()
 
 
-def mqtt_config(workdir, broker, password):
+def mqtt_config(workdir, broker, password, ca=None):
     path = os.path.join(workdir, f"mqtt-password-{len(password)}")
     with open(path, "w") as f:
         f.write(password + "\n")
     return (f"mqtt:\n  host: {BROKER}\n  port: {broker.port}\n  site: {SITE}\n  cell: {CELL}\n"
-            f"  username: {USER}\n  password_file: {path}\n  tls: {{ca_file: {broker.ca}}}\n"
+            f"  username: {USER}\n  password_file: {path}\n  tls: {{ca_file: {ca or broker.ca}}}\n"
             f"  keepalive_s: 5\n  retry_min_s: 0.5\n  retry_max_s: 2\n"
             f"metrics: {{bind_address: 127.0.0.1, port: 0}}\n")
 
@@ -182,6 +183,22 @@ def schema(name):
         return json.load(f)
 
 
+def restart_daemon(line, config_extra):
+    assert line.daemon.stop() == 0
+    line.config_extra = config_extra
+    line.write_config()
+    line.start_daemon()
+
+
+def wrong_ca_phase(line, broker, workdir):
+    """The broker's certificate checked against a CA that did not sign it."""
+    line.daemon.wait_line(r"MQTT broker .*certificate verify failed.*next try in", 20)
+    line.daemon.wait_line(r"(?s)certificate verify failed.*certificate verify failed", 20)
+    print("wrong CA: the TLS handshake refused ('certificate verify failed'), retried",
+          flush=True)
+    restart_daemon(line, mqtt_config(workdir, broker, "not-the-password"))
+
+
 def wrong_password_phase(line, broker, workdir, plc, conveyor):
     """Returns the number of parts measured and the first daemon's log."""
     line.daemon.wait_line(r"MQTT .*(not authori[sz]ed|bad user ?name or password)", 20)
@@ -194,10 +211,7 @@ def wrong_password_phase(line, broker, workdir, plc, conveyor):
     assert health & PLANT_LINK_BIT, f"device health {health:#x} without the plant link's bit"
     print(f"wrong password: refused, retried after {delays[:5]} s; part measured, "
           f"device health {health:#x}", flush=True)
-    assert line.daemon.stop() == 0
-    line.config_extra = mqtt_config(workdir, broker, PASSWORD)
-    line.write_config()
-    line.start_daemon()
+    restart_daemon(line, mqtt_config(workdir, broker, PASSWORD))
     return 1, log
 
 
@@ -299,12 +313,17 @@ def main():
         os.makedirs(workdir)
     broker = Broker(workdir, free_port())
     line = Line(a.bin_dir, workdir, CAMERA)
-    line.config_extra = mqtt_config(workdir, broker, "not-the-password")
+    other_ca = os.path.join(workdir, "other-ca")
+    os.makedirs(other_ca)
+    openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out",
+            "ca.crt", "-days", "2", "-subj", "/CN=another CA", cwd=other_ca)
+    line.config_extra = mqtt_config(workdir, broker, PASSWORD, os.path.join(other_ca, "ca.crt"))
     ok, sub = False, None
     try:
         broker.start()
         sub = Subscriber(broker, "historian")
         line.start()
+        wrong_ca_phase(line, broker, workdir)
         plc, conveyor = Plc(line.plc_port), Conveyor(line.axis_port)
         n, _ = wrong_password_phase(line, broker, workdir, plc, conveyor)
         plc.close()
