@@ -141,10 +141,10 @@ class StatusPageCheck:
 
     def check_devices(self, page, status):
         """The daemon reports its devices' health every control loop: after a part, the table
-        of the five."""
+        of the six (docs/plc-modbus.md "Device health")."""
         assert page.health is not None, "status page: no device section"
         assert status["health_updated"] is not None, f"device health not reported: {page.health}"
-        assert len(page.devices) == len(status["devices"]) == 5, page.devices
+        assert len(page.devices) == len(status["devices"]) == 6, page.devices
 
     def check_pictures(self, page, status):
         faces = status["pictures"]["faces"]
