@@ -10,7 +10,10 @@ same results (docs/virtual-cell.md "Replay", issue 20 item 3).
    Its first scan loses its start on purpose, so the daemon scans that face again at once.
 3. Every feature of the replay's result (its results JSON line) and of `hotgauge measure` of the
    replay's own archive equals `hotgauge measure` of the original recording to 1 µm, with the
-   same verdicts; the replayed recording's profiles are the original's bit for bit.
+   same verdicts; the replayed recording's profiles are the original's bit for bit. Both daemons
+   run with pipeline settings off their defaults (a 2.5 Hz high-pass corner, 2 threads), and
+   `hotgauge measure` is given the same as options (issue 22): with the default corner the
+   features differ, so the comparison shows the settings are applied alike.
 
     /usr/bin/python3 replay_test.py BUILD_DIR                  (ctest replay_through_daemon)
     /usr/bin/python3 replay_test.py BUILD_DIR --off-grid 3     (the peak format's quantisation)
@@ -34,6 +37,10 @@ from virtual_line import (DONE, FAULT, NOMINAL, Conveyor, Line, Plc, decode,  # 
 
 ADDRESS, REPLAY_ADDRESS = "127.0.0.11", "127.0.0.12"  # this test's own cameras
 PART_ID = 250001
+# The daemon's pipeline settings (docs/operations.md "Configuration") and the same as options of
+# `hotgauge measure`: a non-default high-pass corner and threads, which must give the same features.
+PIPELINE = "pipeline: {highpass_hz: 2.5, threads: 2}\n"
+MEASURE_OPTIONS = ("--highpass-hz", "2.5")
 TOLERANCE_UM = 1.0
 
 
@@ -172,19 +179,30 @@ def archived_part(bin_dir, workdir):
     first = os.path.join(workdir, "line")
     os.makedirs(first)
     line = Line(bin_dir, first, ADDRESS, calibration=cal, true_calibration=cal,
-                archive_every_nth_ok=1)
+                archive_every_nth_ok=1, config_extra=PIPELINE)
     result, rec = one_part(line)
     print(f"archived by the line: {rec} ({result['part']['verdict']})")
     second = os.path.join(workdir, "replay")
     os.makedirs(second)
     replay = ReplayLine(bin_dir, second, REPLAY_ADDRESS, calibration=cal,
-                        archive_every_nth_ok=1, recording=rec, lose_first_start=True)
+                        archive_every_nth_ok=1, recording=rec, lose_first_start=True,
+                        config_extra=PIPELINE)
     replayed, rec2 = one_part(replay, conveyor=False)
     daemon_log = open(os.path.join(second, "hotgauged.log")).read()
     assert daemon_log.count("the scan lost its start") == 1 and "scanning it again" in daemon_log, \
         "the replay's first scan was to lose its start once"
-    offline = json.loads(hotgauge(bin_dir, "measure", rec, "--calibration", cal, "--json"))
-    again = json.loads(hotgauge(bin_dir, "measure", rec2, "--calibration", cal, "--json"))
+    offline = json.loads(hotgauge(bin_dir, "measure", rec, "--calibration", cal, "--json",
+                                  *MEASURE_OPTIONS))
+    again = json.loads(hotgauge(bin_dir, "measure", rec2, "--calibration", cal, "--json",
+                                *MEASURE_OPTIONS))
+    default = json.loads(hotgauge(bin_dir, "measure", rec, "--calibration", cal, "--json"))
+    moved = max(abs(a["cold_mm"] - b["cold_mm"]) * 1e3
+                for a, b in zip(offline["features"], default["features"])
+                if a["cold_mm"] is not None and b["cold_mm"] is not None)
+    print(f"the daemon's pipeline settings ({PIPELINE.strip()}) are the tool's "
+          f"{' '.join(MEASURE_OPTIONS)}: with the default corner the features move by up to "
+          f"{moved:.3f} µm")
+    assert moved > 0.01, "the high-pass corner changed nothing: the comparison proves nothing"
     worst = max(compare("line's result vs measure of its archive", result["part"], offline),
                 compare("replay's result vs measure of the original", replayed["part"], offline),
                 compare("measure of the replay's archive vs the original", again, offline))

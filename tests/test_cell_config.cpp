@@ -11,6 +11,7 @@
 #include "../src/cell/plc_result.hpp"
 #include "hotgauge/cell/config.hpp"
 #include "hotgauge/cell/journal.hpp"
+#include "hotgauge/compensate/compensate.hpp"
 #include "hotgauge/core/clock.hpp"
 #include "temp_dir.hpp"
 
@@ -149,6 +150,32 @@ TEST(DaemonConfig, StatusPageIsOnlyWhatTheConfigAsksFor) {
     auto c = cell::read_daemon_config(tmp.path / "hotgauged.yaml");
     ASSERT_TRUE(c.ok()) << c.error().message;
     EXPECT_FALSE(c->status_page.enabled);
+}
+
+TEST(DaemonConfig, PipelineSettingsAsTheToolTakesThem) {
+    auto c = cell::read_daemon_config(kConfigDir + "/hotgauged.yaml");
+    ASSERT_TRUE(c.ok()) << c.error().message;
+    EXPECT_TRUE(c->pipeline.compensate);
+    EXPECT_EQ(c->pipeline.highpass_hz, compensate::CompensationConfig{}.highpass_hz);
+    EXPECT_EQ(c->pipeline.threads, 0);
+    int line = 0;
+    auto e = error_with("  highpass_hz: 1.5 ", "  highpass_hz: -2  ", &line);
+    EXPECT_NE(e.find(":" + std::to_string(line) + ": pipeline.highpass_hz: must be positive"),
+              std::string::npos)
+        << e;
+    e = error_with("  highpass_hz: 1.5 ", "  highpass_hz: 80  ", &line);
+    EXPECT_NE(e.find(":" + std::to_string(line) + ": pipeline.highpass_hz: at most 50 Hz"),
+              std::string::npos)
+        << e;
+    e = error_with("  threads: 0 ", "  threads: -1 ", &line);
+    EXPECT_NE(e.find(":" + std::to_string(line) + ": pipeline.threads: must be in 0..256"),
+              std::string::npos)
+        << e;
+    e = error_with("  compensation: true ", "  compensation: maybe ", &line);
+    EXPECT_NE(e.find(":" + std::to_string(line) + ": pipeline.compensation"), std::string::npos)
+        << e;
+    e = error_with("  threads: 0 ", "  threads: 0\n  icp_stop_deg: 1 ", &line);
+    EXPECT_NE(e.find("icp_stop_deg"), std::string::npos) << e;  // no setting that nothing reads
 }
 
 TEST(DaemonConfig, MqttSettingsAreCheckedBeforeTheBrokerIsTried) {

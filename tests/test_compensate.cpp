@@ -58,11 +58,12 @@ Eigen::Vector3d residual_um(const sim::SimResult& s, const CompensationConfig& c
         EXPECT_TRUE(fc.applied);
         EXPECT_FALSE(fc.degraded) << fc.reasons.front();
         Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-        for (std::size_t k = 0; k < fc.u_mm.size(); ++k)
-            mean += 1000.0 * (fc.u_mm[k] - s.truth.faces[j].u_mm[k]);
-        mean /= static_cast<double>(fc.u_mm.size());
-        for (std::size_t k = 0; k < fc.u_mm.size(); ++k) {
-            const Eigen::Vector3d e = 1000.0 * (fc.u_mm[k] - s.truth.faces[j].u_mm[k]);
+        for (std::size_t k = 0; k < fc.displacement_mm.size(); ++k)
+            mean += 1000.0 * (fc.displacement_mm[k] - s.truth.faces[j].displacement_mm[k]);
+        mean /= static_cast<double>(fc.displacement_mm.size());
+        for (std::size_t k = 0; k < fc.displacement_mm.size(); ++k) {
+            const Eigen::Vector3d e =
+                1000.0 * (fc.displacement_mm[k] - s.truth.faces[j].displacement_mm[k]);
             sum2 += e.cwiseAbs2();
             sum2_centred += (e - mean).cwiseAbs2();
             n += 1;
@@ -114,7 +115,7 @@ TEST(CompensateFace, DefaultVibrationWithin5um) {
         const Eigen::Vector3d r = residual_um(s);
         double peak = 0;
         for (const auto& f : s.truth.faces)
-            for (const auto& u : f.u_mm) peak = std::max(peak, u.norm());
+            for (const auto& u : f.displacement_mm) peak = std::max(peak, u.norm());
         std::printf(
             "default vibration (8/23/47 Hz, peak |u| %.3f mm), seed %llu: residual RMS "
             "x %.2f y %.2f z %.2f um\n",
@@ -373,11 +374,13 @@ TEST(CompensateFace, TailErrorIsWhyTheMarginRuleExists) {
                 f.accel_times_ns.resize(keep);
                 f.accel_mps2.resize(keep * 3);
                 const auto fc = compensate::compensate_face(f, {});
-                for (std::size_t k = 0; k < fc.u_mm.size(); ++k) {
+                for (std::size_t k = 0; k < fc.displacement_mm.size(); ++k) {
                     const double d = static_cast<double>(t_end - f.profile_times_ns[k]) * 1e-9;
                     int b = 0;
                     while (d >= edges[b + 1]) ++b;
-                    s2[b] += (1000.0 * (fc.u_mm[k] - s.truth.faces[j].u_mm[k])).squaredNorm();
+                    s2[b] +=
+                        (1000.0 * (fc.displacement_mm[k] - s.truth.faces[j].displacement_mm[k]))
+                            .squaredNorm();
                     n[b] += 1;
                 }
             }
@@ -435,17 +438,20 @@ GapErrors gap_errors(std::int64_t gap_ns, int seeds, const CompensationConfig& c
                 f.accel_mps2.erase(f.accel_mps2.begin() + 3 * a, f.accel_mps2.begin() + 3 * b);
                 const auto fc = compensate::compensate_face(f, c);
                 untrusted += static_cast<double>(fc.n_degraded);
-                profiles += static_cast<double>(fc.u_mm.size());
-                for (std::size_t k = 0; k < fc.u_mm.size(); ++k) {
+                profiles += static_cast<double>(fc.displacement_mm.size());
+                for (std::size_t k = 0; k < fc.displacement_mm.size(); ++k) {
                     const std::int64_t t = f.profile_times_ns[k];
                     const double d =
                         static_cast<double>(t < g0 ? g0 - t : (t > g1 ? t - g1 : 0)) * 1e-9;
                     int bin = 0;
                     while (d >= edges[bin + 1]) ++bin;
-                    const double e = 1000.0 * (fc.u_mm[k] - s.truth.faces[j].u_mm[k]).norm();
+                    const double e =
+                        1000.0 *
+                        (fc.displacement_mm[k] - s.truth.faces[j].displacement_mm[k]).norm();
                     s2[bin] += e * e;
                     base2[bin] +=
-                        (1000.0 * (clean.u_mm[k] - s.truth.faces[j].u_mm[k])).squaredNorm();
+                        (1000.0 * (clean.displacement_mm[k] - s.truth.faces[j].displacement_mm[k]))
+                            .squaredNorm();
                     worst[bin] = std::max(worst[bin], e);
                     n[bin] += 1;
                 }
@@ -634,7 +640,7 @@ TEST(CompensateFace, RandomHolesErrorByDistance) {
                 for (std::size_t j = 0; j < lossy.faces.size(); ++j) {
                     const auto& f = lossy.faces[j];
                     const auto fc = compensate::compensate_face(f, c);
-                    for (std::size_t k = 0; k < fc.u_mm.size(); ++k) {
+                    for (std::size_t k = 0; k < fc.displacement_mm.size(); ++k) {
                         if (fc.profile_degraded[k]) continue;
                         const double t = 1e-9 * static_cast<double>(f.profile_times_ns[k] -
                                                                     f.profile_times_ns[0]);
@@ -645,9 +651,9 @@ TEST(CompensateFace, RandomHolesErrorByDistance) {
                         if (d > 1e8) continue;  // no hole on this face
                         int bin = 0;
                         while (d >= edges[bin + 1]) ++bin;
-                        const auto& truth = s.truth.faces[j].u_mm[k];
-                        const double err = 1000.0 * (fc.u_mm[k] - truth).norm();
-                        const double base = 1000.0 * (clean[j].u_mm[k] - truth).norm();
+                        const auto& truth = s.truth.faces[j].displacement_mm[k];
+                        const double err = 1000.0 * (fc.displacement_mm[k] - truth).norm();
+                        const double base = 1000.0 * (clean[j].displacement_mm[k] - truth).norm();
                         s2[bin] += err * err;
                         base2[bin] += base * base;
                         worst[bin] = std::max(worst[bin], err);

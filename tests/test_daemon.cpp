@@ -11,6 +11,9 @@
 #include <thread>
 
 #include "hotgauge/cell/daemon.hpp"
+#include "hotgauge/io/model_io.hpp"
+#include "hotgauge/io/recipe.hpp"
+#include "hotgauge/pipeline/pipeline.hpp"
 #include "hotgauge/plc/register_map.hpp"
 #include "hotgauge/vcell/axis_server.hpp"
 #include "temp_dir.hpp"
@@ -230,6 +233,40 @@ TEST(Daemon, ASetupWithAMissingRecipeIsAnErrorNamingIt) {
     ASSERT_FALSE(setup);
     EXPECT_NE(setup.error().message.find("no-such-part.yaml"), std::string::npos)
         << setup.error().message;
+}
+
+// The part's model (pipeline::part_model, the tool's and the daemon's one way): a saved model of
+// another part is refused at start naming the file and both parts; the recipe's own loads, and
+// is the model the recipe builds.
+TEST(Daemon, ASavedModelMustBeTheSlotsPart) {
+    test::TempDir dir;
+    auto recipe = io::read_recipe(HOTGAUGE_SOURCE_DIR "/config/parts/hub-a.yaml");
+    ASSERT_TRUE(recipe) << recipe.error().message;
+    auto built = pipeline::part_model(*recipe);
+    ASSERT_TRUE(built) << built.error().message;
+    const auto own = dir.path / "hub-a.hgm", other = dir.path / "hub-b.hgm";
+    ASSERT_TRUE(io::write_model(*built, own));
+    match::Model renamed = *built;
+    renamed.name = "hub-b";
+    ASSERT_TRUE(io::write_model(renamed, other));
+    const auto config = dir.path / "hotgauged.yaml";
+    write(config, config_text(dir.path / "results") + "models:\n  1: " + other.string() + "\n");
+    auto setup = cell::load_setup(config);
+    ASSERT_FALSE(setup);
+    EXPECT_NE(setup.error().message.find("recipe slot 1: " + other.string() +
+                                         ": model of part 'hub-b', the recipe is 'hub-a'"),
+              std::string::npos)
+        << setup.error().message;
+    write(config, config_text(dir.path / "results") + "models:\n  1: " + own.string() + "\n");
+    setup = cell::load_setup(config);
+    ASSERT_TRUE(setup) << setup.error().message;
+    const match::Model& loaded = *(*setup)->models.at(1);
+    EXPECT_EQ(loaded.name, "hub-a");
+    EXPECT_EQ(loaded.points.size(), built->points.size());
+    auto same = pipeline::part_model(*recipe, {.model_file = own});
+    ASSERT_TRUE(same) << same.error().message;
+    EXPECT_EQ(same->points.size(), built->points.size());
+    EXPECT_FALSE(pipeline::part_model(*recipe, {.model_file = dir.path / "missing.hgm"}));
 }
 
 // A master slot's certificate must fit its recipe (docs/verification.md): another recipe's, or

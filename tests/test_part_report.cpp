@@ -76,8 +76,8 @@ report::DeviationMap face_map(const std::string& face) {
     const auto& e = env();
     const auto* scan = e.sim.recording.face(face);
     EXPECT_NE(scan, nullptr);
-    const auto u = e.result.u_world_mm.find(face);
-    EXPECT_NE(u, e.result.u_world_mm.end()) << face << " not compensated";
+    const auto u = e.result.displacement_mm.find(face);
+    EXPECT_NE(u, e.result.displacement_mm.end()) << face << " not compensated";
     EXPECT_DOUBLE_EQ(report::hot_scale(e.result), e.growth);
     const auto nominal = core::AxisymmetricSolid::from_recipe(e.recipe, {}, {}, e.growth);
     return report::deviation_map(*scan, &u->second, *e.result.T_world_part, nominal);
@@ -157,7 +157,7 @@ TEST(DeviationMap, EachPixelIsItsProfilePointMovedByItsDisplacement) {
     std::size_t points = 0;
     for (const auto& face : e.sim.recording.faces) {
         const report::DeviationMap m = face_map(face.name);
-        const auto& u = e.result.u_world_mm.at(face.name);
+        const auto& u = e.result.displacement_mm.at(face.name);
         for (std::int64_t k = 0; k < face.n_profiles(); ++k)
             for (std::int64_t i = 0; i < face.width; ++i) {
                 const auto px = static_cast<std::size_t>(k * face.width + i);
@@ -296,7 +296,7 @@ TEST(PartReport, ValueFarOutOfToleranceIsClampedToTheEdge) {
 TEST(PartReport, ResultOfAnotherRecordingIsAnError) {
     const auto& e = env();
     pipeline::PartResult r = e.result;
-    r.u_world_mm["top"].pop_back();
+    r.displacement_mm["top"].pop_back();
     auto html = report::part_report_html(e.sim.recording, e.recipe, r);
     ASSERT_FALSE(html);
     EXPECT_NE(html.error().message.find("face top"), std::string::npos) << html.error().message;

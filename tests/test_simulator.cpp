@@ -90,7 +90,7 @@ void round_trip(Fixture fx, const std::string& name) {
         const auto& ft = truth.faces[j];
         ASSERT_EQ(ft.name, face.name);
         const bool support = fx.cell.faces[j].support_visible;
-        const auto corrected = core::world_cloud(face, &ft.u_mm);
+        const auto corrected = core::world_cloud(face, &ft.displacement_mm);
         const auto nominal = core::world_cloud(face);
         std::int64_t on = 0, off_clean = 0, spikes_off = 0, nominal_off = 0, part_points = 0;
         for (std::size_t q = 0; q < corrected.points_mm.size(); ++q) {
@@ -119,7 +119,7 @@ void round_trip(Fixture fx, const std::string& name) {
     // The vibration matters: without u(t) points are off by more than 5σ.
     double peak_u = 0;
     for (const auto& f : truth.faces)
-        for (const auto& u : f.u_mm) peak_u = std::max(peak_u, u.norm());
+        for (const auto& u : f.displacement_mm) peak_u = std::max(peak_u, u.norm());
     EXPECT_GT(peak_u, 0.1);
     EXPECT_GT(total_nominal_off, total_on / 100);
     fs::remove_all(dir);

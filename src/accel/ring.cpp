@@ -146,4 +146,19 @@ HistoryState history_before(const AccelRing& ring, std::int64_t now_ns, std::int
                                                         : HistoryState::arriving;
 }
 
+AccelWindow attach_face_window(const AccelRing& ring, core::FaceScan& face,
+                               std::int64_t margin_ns) {
+    AccelWindow w = ring.copy_range(face.profile_times_ns.front() - margin_ns,
+                                    face.profile_times_ns.back() + margin_ns);
+    face.accel_times_ns.clear();
+    face.accel_mps2.clear();
+    face.accel_times_ns.reserve(w.samples.size());
+    face.accel_mps2.reserve(3 * w.samples.size());
+    for (const auto& smp : w.samples) {
+        face.accel_times_ns.push_back(smp.t_ns);
+        face.accel_mps2.insert(face.accel_mps2.end(), {smp.x_mps2, smp.y_mps2, smp.z_mps2});
+    }
+    return w;
+}
+
 }  // namespace hotgauge::accel

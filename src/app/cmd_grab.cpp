@@ -196,18 +196,12 @@ int run(GrabArgs a) {
     std::string accel_summary = "no accelerometer (K = 0)";
     if (accel_source) {
         const auto margin_ns = static_cast<std::int64_t>(a.accel_margin_s * 1e9);
-        const std::int64_t t0 = scanned.profile_times_ns.front() - margin_ns;
-        const std::int64_t t1 = scanned.profile_times_ns.back() + margin_ns;
         // Samples after the margin's end arrive a datagram or so later: wait, bounded.
         ring.wait_for(
-            t1, std::chrono::milliseconds(static_cast<long long>(1000 + 2000 * a.accel_margin_s)));
+            scanned.profile_times_ns.back() + margin_ns,
+            std::chrono::milliseconds(static_cast<long long>(1000 + 2000 * a.accel_margin_s)));
         accel_source->stop();
-        const accel::AccelWindow w = ring.copy_range(t0, t1);
-        for (const auto& smp : w.samples) {
-            scanned.accel_times_ns.push_back(smp.t_ns);
-            scanned.accel_mps2.insert(scanned.accel_mps2.end(),
-                                      {smp.x_mps2, smp.y_mps2, smp.z_mps2});
-        }
+        const accel::AccelWindow w = accel::attach_face_window(ring, scanned, margin_ns);
         const auto status = accel_source->status();
         accel_summary = std::to_string(w.samples.size()) + " accelerometer samples (" +
                         std::to_string(w.gaps.size()) + " gaps, " +

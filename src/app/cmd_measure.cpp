@@ -86,13 +86,9 @@ std::optional<pipeline::PartResult> measure_job(const MeasureJob& a, core::Recor
     }
     std::optional<match::Model> model;
     if (!a.model.empty()) {
-        auto m = io::read_model(a.model);
+        auto m = pipeline::part_model(*recipe, {.model_file = a.model});
         if (!m) {
             spdlog::error("{}", m.error().message);
-            return std::nullopt;
-        }
-        if (m->name != recipe->name) {
-            spdlog::error("{}: model of part '{}', recipe is '{}'", a.model, m->name, recipe->name);
             return std::nullopt;
         }
         model = std::move(*m);

@@ -14,33 +14,17 @@
 #include "commands.hpp"
 #include "hotgauge/io/model_io.hpp"
 #include "hotgauge/io/recipe.hpp"
-#include "hotgauge/io/surface_io.hpp"
 #include "hotgauge/match/model.hpp"
+#include "hotgauge/pipeline/pipeline.hpp"
 
 namespace hotgauge::app {
 namespace {
-
-constexpr double kMeshSpacingMm = 0.5;  // dense samples of a mesh: the ICP surface
 
 struct ModelArgs {
     std::string recipe = HOTGAUGE_CONFIG_DIR "/parts/hub-a.yaml";
     std::string mesh, scan, out, file;
     std::optional<double> sampling_mm;  // default: the recipe's matching.sampling_mm
 };
-
-// The model from --mesh, --scan, the recipe's mesh_file, or else its sections.
-core::Result<match::Model> build_model(const ModelArgs& a, const core::Recipe& recipe) {
-    match::ModelConfig config;
-    config.sampling_mm = a.sampling_mm.value_or(recipe.matching.sampling_mm);
-    const std::string mesh = a.mesh.empty() && a.scan.empty() ? recipe.mesh_file : a.mesh;
-    if (mesh.empty() && a.scan.empty()) return match::model_from_recipe(recipe, config);
-    auto samples =
-        mesh.empty() ? io::read_scan_samples(a.scan) : io::read_mesh_samples(mesh, kMeshSpacingMm);
-    if (!samples) return samples.error();
-    return match::model_from_samples(recipe.name, mesh.empty() ? "scan " + a.scan : "mesh " + mesh,
-                                     std::move(samples->points), std::move(samples->normals),
-                                     config);
-}
 
 int run_build(const ModelArgs& a) {
     auto recipe = io::read_recipe(a.recipe);
@@ -49,7 +33,9 @@ int run_build(const ModelArgs& a) {
         return 1;
     }
     const auto t0 = std::chrono::steady_clock::now();
-    auto model = build_model(a, *recipe);
+    // From --mesh, --scan, the recipe's mesh_file, or else its sections.
+    auto model = pipeline::part_model(
+        *recipe, {.mesh = a.mesh, .scan = a.scan, .sampling_mm = a.sampling_mm});
     const double build_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (!model) {

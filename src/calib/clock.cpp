@@ -87,7 +87,7 @@ std::vector<double> block_costs(const std::vector<FaceSums>& faces,
             ++all[b];
             const auto k = static_cast<std::size_t>(ps[q].k);
             if (!c.applied || c.profile_degraded[k]) continue;  // not compensated at this offset
-            const Eigen::Vector3d& u = c.u_mm[k];
+            const Eigen::Vector3d& u = c.displacement_mm[k];
             cost[b] += ps[q].c + 2.0 * u.dot(ps[q].b) + u.dot(ps[q].M * u);
             ++counted[b];
         }
@@ -167,7 +167,7 @@ std::vector<FaceSums> all_face_sums(const core::Recording& rec, const Artifact& 
         if (config) {
             compensate::CompensationConfig c = *config;
             c.clock_offset_s = offset_s;
-            u = compensate::compensate_face(f, c).u_mm;
+            u = compensate::compensate_face(f, c).displacement_mm;
             if (u.size() != static_cast<std::size_t>(f.n_profiles())) continue;
         }
         FaceSums s = face_sums(f, a, config ? &u : nullptr, gate_mm);

@@ -200,6 +200,18 @@ void read_endpoint(const YamlReader& y, const YAML::Node& p, const std::string& 
     out.port = integer_in(y, p, w, "port", 0, 65535, out.port);
 }
 
+PipelineSettings read_pipeline(const YamlReader& y, const YAML::Node& p) {
+    const std::string w = "pipeline";
+    y.expect_map(p, w, {"compensation", "highpass_hz", "threads"});
+    PipelineSettings s;
+    if (p["compensation"]) s.compensate = y.boolean(p["compensation"], w + ".compensation");
+    s.highpass_hz = positive(y, p, w, "highpass_hz", s.highpass_hz);
+    if (s.highpass_hz > 50.0)  // the scans' vibration is 2-50 Hz (docs/compensation.md)
+        y.fail(p["highpass_hz"], w + ".highpass_hz: at most 50 Hz");
+    s.threads = integer_in(y, p, w, "threads", 0, 256, s.threads);
+    return s;
+}
+
 // A topic level: not empty, and none of MQTT's separators or wildcards.
 std::string topic_level(const YamlReader& y, const YAML::Node& m, const char* key) {
     const std::string v = y.string(y.require(m, "mqtt", key), std::string("mqtt.") + key);
@@ -257,11 +269,11 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
     const YamlReader y(file.string());
     return y.guarded<DaemonConfig>([&] {
         const YAML::Node root = y.load();
-        y.expect_map(
-            root, "hotgauged",
-            {"calibration", "calibration_interval_days", "faces", "recipes", "models", "masters",
-             "camera", "accelerometer", "axis", "plc", "pyrometer", "results", "status_page",
-             "metrics", "mqtt", "cell"});  // cell: moved to the calibration, refused below by name
+        y.expect_map(root, "hotgauged",
+                     {"calibration", "calibration_interval_days", "faces", "recipes", "models",
+                      "masters", "camera", "accelerometer", "axis", "plc", "pyrometer", "results",
+                      "status_page", "metrics", "mqtt", "pipeline",
+                      "cell"});  // cell: moved to the calibration, refused below by name
         DaemonConfig c;
         c.file = file;
         c.hash = file_hash(file);
@@ -397,6 +409,7 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
         if (const YAML::Node p = root["status_page"])
             read_endpoint(y, p, "status_page", c.status_page);
         if (const YAML::Node p = root["metrics"]) read_endpoint(y, p, "metrics", c.metrics);
+        if (const YAML::Node p = root["pipeline"]) c.pipeline = read_pipeline(y, p);
         if (const YAML::Node m = root["mqtt"]) c.mqtt = read_mqtt(y, m, base, c.results.dir);
         return c;
     });

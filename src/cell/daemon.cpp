@@ -114,24 +114,13 @@ core::Result<std::shared_ptr<const Setup>> load_setup(const fs::path& config_fil
     for (const auto& [slot, path] : s->config.recipes) {
         auto recipe = io::read_recipe(path);
         if (!recipe) return recipe.error();
-        std::shared_ptr<const match::Model> model;
-        if (auto m = s->config.models.find(slot); m != s->config.models.end()) {
-            auto loaded = io::read_model(m->second);
-            if (!loaded) return loaded.error();
-            if (loaded->name != recipe->name)
-                return core::make_error(m->second.string() + ": model of part '" + loaded->name +
-                                        "', recipe slot " + std::to_string(slot) + " is '" +
-                                        recipe->name + "'");
-            model = std::make_shared<match::Model>(std::move(*loaded));
-        } else {
-            match::ModelConfig mc;
-            mc.sampling_mm = recipe->matching.sampling_mm;
-            auto built = match::model_from_recipe(*recipe, mc);
-            if (!built)
-                return core::make_error(path.string() + ": part model: " + built.error().message);
-            model = std::make_shared<match::Model>(std::move(*built));
-        }
-        s->models.emplace(slot, std::move(model));
+        const auto file = s->config.models.find(slot);
+        auto model = pipeline::part_model(
+            *recipe, {.model_file = file == s->config.models.end() ? fs::path() : file->second});
+        if (!model)
+            return core::make_error("recipe slot " + std::to_string(slot) + ": " +
+                                    model.error().message);
+        s->models.emplace(slot, std::make_shared<const match::Model>(std::move(*model)));
         s->recipes.emplace(slot, std::move(*recipe));
     }
     for (const auto& [slot, path] : s->config.masters) {
@@ -789,26 +778,11 @@ void Daemon::Impl::read_part_temperature(Captured& c) const {
         (t.last_error.empty() ? std::string(t.stale ? "stale" : "out of range") : t.last_error));
 }
 
-namespace {
-
-// A face's accelerometer window, the margin before and after its scan, as far as it has arrived.
-void copy_window(const accel::AccelRing& ring, core::FaceScan& f, std::int64_t margin_ns) {
-    const accel::AccelWindow w = ring.copy_range(f.profile_times_ns.front() - margin_ns,
-                                                 f.profile_times_ns.back() + margin_ns);
-    f.accel_times_ns.clear();
-    f.accel_mps2.clear();
-    for (const auto& smp : w.samples) {
-        f.accel_times_ns.push_back(smp.t_ns);
-        f.accel_mps2.insert(f.accel_mps2.end(), {smp.x_mps2, smp.y_mps2, smp.z_mps2});
-    }
-}
-
-}  // namespace
-
 // Every face's window: complete for every face but the last, whose margin runs on while
 // processing starts (complete_last_face).
 void Daemon::Impl::attach_accelerometer(Captured& c, double margin_s) const {
-    for (auto& f : c.rec.faces) copy_window(*ring, f, static_cast<std::int64_t>(margin_s * 1e9));
+    for (auto& f : c.rec.faces)
+        accel::attach_face_window(*ring, f, static_cast<std::int64_t>(margin_s * 1e9));
 }
 
 // The last face's record once it reaches `until_ns` (a bounded wait), copied again: up to its
@@ -816,7 +790,8 @@ void Daemon::Impl::attach_accelerometer(Captured& c, double margin_s) const {
 // the compensation of its last profiles needs (docs/compensation.md).
 void Daemon::Impl::refresh_last_face(Captured& c, std::int64_t until_ns, double timeout_s) const {
     ring->wait_for(until_ns, milliseconds(static_cast<long long>(1000 * timeout_s)));
-    copy_window(*ring, c.rec.faces.back(), static_cast<std::int64_t>(c.margin_s * 1e9));
+    accel::attach_face_window(*ring, c.rec.faces.back(),
+                              static_cast<std::int64_t>(c.margin_s * 1e9));
 }
 
 // ---- processing ----------------------------------------------------------------------------
@@ -891,11 +866,14 @@ pipeline::PartResult Daemon::Impl::measure_captured(Captured& c) const {
         r.warnings.push_back(c.failure);
         return r;
     }
+    const PipelineSettings& ps = job.setup->config.pipeline;
     pipeline::PipelineOptions opt;
     opt.model = job.setup->models.at(job.trigger.recipe_slot).get();
     // No accelerometer configured (source: none): nothing to compensate with, as with
     // `hotgauge measure --no-compensation` (a warning, not every feature degraded).
-    opt.compensate = accel != nullptr;
+    opt.compensate = accel != nullptr && ps.compensate;
+    opt.compensation.highpass_hz = ps.highpass_hz;
+    opt.measure.threads = ps.threads;
     if (accel) refresh_last_face(c, c.last_profile_ns + ring->period_ns(), 0.2);
     pipeline::PartRun run(c.rec, *job.recipe, opt);
     run.measure_all_but_last();
@@ -914,6 +892,8 @@ pipeline::PartResult Daemon::Impl::measure_captured(Captured& c) const {
     }
     c.after_margin_ms = ms_between(t0, Clock::now());
     if (!accel) r.warnings.push_back("no accelerometer configured: vibration not compensated");
+    if (accel && !ps.compensate)
+        r.warnings.push_back("pipeline.compensation is false: vibration not compensated");
     for (const auto& why : c.degraded) {
         r.degraded = true;
         r.degraded_reasons.push_back(why);
@@ -952,7 +932,8 @@ std::string Daemon::Impl::publish(const Captured& c, const results::ResultEntry&
         rev != job.setup->recipe_revision.end())
         published.recipe_revision = rev->second;
     if (!c.left_out.empty()) published.reasons |= plc::reason::kFaceMissing;
-    if (!accel) published.reasons |= plc::reason::kNotCompensated;
+    if (!accel || !job.setup->config.pipeline.compensate)
+        published.reasons |= plc::reason::kNotCompensated;
     if (auto ok = server->finish(job.trigger.trigger_id, published); !ok)
         return verdict_text(r, check) + ", not published: " + ok.error().message;
     problem = r.measurement.verdict != measure::Verdict::kOk || r.degraded;

@@ -272,7 +272,7 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
     FaceCompensation out;
     out.face = face.name;
     const std::int64_t np = face.n_profiles();
-    out.u_mm.assign(np, Eigen::Vector3d::Zero());
+    out.displacement_mm.assign(np, Eigen::Vector3d::Zero());
     out.profile_degraded.assign(np, 0);
     auto degrade_all = [&](const std::string& why) {
         out.degraded = true;
@@ -346,9 +346,9 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
         const auto i0 = std::min<std::size_t>(static_cast<std::size_t>(pos), n - 2);
         const double f = pos - static_cast<double>(i0);
         for (int a = 0; a < 3; ++a)
-            out.u_mm[k][a] = 1000.0 * (u[a][i0] + f * (u[a][i0 + 1] - u[a][i0]));
-        out.peak_mm = std::max(out.peak_mm, out.u_mm[k].norm());
-        sum2 += out.u_mm[k].squaredNorm();
+            out.displacement_mm[k][a] = 1000.0 * (u[a][i0] + f * (u[a][i0 + 1] - u[a][i0]));
+        out.peak_mm = std::max(out.peak_mm, out.displacement_mm[k].norm());
+        sum2 += out.displacement_mm[k].squaredNorm();
         ++n_applied;
     }
     out.untrusted = untrusted_runs(face, trouble, t0, t1, c);

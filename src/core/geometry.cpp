@@ -10,13 +10,13 @@ bool is_rotation(const Eigen::Matrix3d& R, double tol) {
     return orth <= tol && std::abs(R.determinant() - 1.0) <= tol;
 }
 
-FaceCloud world_cloud(const FaceScan& face, const std::vector<Eigen::Vector3d>* u_world_mm) {
+FaceCloud world_cloud(const FaceScan& face, const std::vector<Eigen::Vector3d>* displacement_mm) {
     FaceCloud cloud;
     const std::int64_t n = face.n_profiles();
     cloud.points_mm.reserve(static_cast<std::size_t>(n * face.width / 2));
     for (std::int64_t k = 0; k < n; ++k) {
         Eigen::Vector3d shift = face.profile_positions_mm[k] * face.scan_direction;
-        if (u_world_mm) shift += (*u_world_mm)[k];
+        if (displacement_mm) shift += (*displacement_mm)[k];
         for (std::int64_t i = 0; i < face.width; ++i) {
             const float x = face.x(k, i), z = face.z(k, i);
             if (std::isnan(x) || std::isnan(z)) continue;

@@ -17,12 +17,12 @@ struct Samples {
 // Voting samples of every face: the scan grid thinned to about half the sampling distance,
 // normals by PCA over grid neighbours within `normal_radius_mm` (oriented to the sensor), then
 // one sample per `sampling_mm` voxel.
-Samples voting_samples(const core::Recording& rec, const FaceDisplacements& u, double sampling_mm,
-                       double normal_radius_mm);
+Samples voting_samples(const core::Recording& rec, const core::FaceDisplacements& u,
+                       double sampling_mm, double normal_radius_mm);
 
 // Points of every face on a grid of about `grid_mm` pitch (no normals).
-std::vector<Eigen::Vector3f> grid_points(const core::Recording& rec, const FaceDisplacements& u,
-                                         double grid_mm);
+std::vector<Eigen::Vector3f> grid_points(const core::Recording& rec,
+                                         const core::FaceDisplacements& u, double grid_mm);
 
 // A plane n·x = d (n unit).
 struct Plane {

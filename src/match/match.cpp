@@ -203,7 +203,7 @@ AxisError axis_error(const Eigen::Isometry3d& T_true, const Eigen::Isometry3d& T
     return e;
 }
 
-MatchResult match(const Model& model, const core::Recording& rec, const FaceDisplacements& u,
+MatchResult match(const Model& model, const core::Recording& rec, const core::FaceDisplacements& u,
                   const MatchConfig& cfg) {
     MatchResult res;
     const auto t0 = Clock::now();

@@ -73,7 +73,8 @@ class FaceGrid {
     double col_pitch_ = 1, prof_pitch_ = 1;
 };
 
-const std::vector<Eigen::Vector3d>* face_u(const FaceDisplacements& u, const std::string& name) {
+const std::vector<Eigen::Vector3d>* face_u(const core::FaceDisplacements& u,
+                                           const std::string& name) {
     auto it = u.find(name);
     return it == u.end() ? nullptr : &it->second;
 }
@@ -85,8 +86,8 @@ inline std::int64_t voxel_key(const Eigen::Vector3f& p, float inv) {
 
 }  // namespace
 
-Samples voting_samples(const core::Recording& rec, const FaceDisplacements& u, double sampling_mm,
-                       double normal_radius_mm) {
+Samples voting_samples(const core::Recording& rec, const core::FaceDisplacements& u,
+                       double sampling_mm, double normal_radius_mm) {
     Samples out;
     std::unordered_map<std::int64_t, std::uint32_t> taken;
     const float inv = static_cast<float>(1.0 / sampling_mm);
@@ -135,8 +136,8 @@ Samples voting_samples(const core::Recording& rec, const FaceDisplacements& u, d
     return out;
 }
 
-std::vector<Eigen::Vector3f> grid_points(const core::Recording& rec, const FaceDisplacements& u,
-                                         double grid_mm) {
+std::vector<Eigen::Vector3f> grid_points(const core::Recording& rec,
+                                         const core::FaceDisplacements& u, double grid_mm) {
     std::vector<Eigen::Vector3f> out;
     for (const auto& face : rec.faces) {
         if (face.width < 1 || face.n_profiles() < 1) continue;

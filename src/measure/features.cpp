@@ -260,7 +260,7 @@ PartMeasurer::PartMeasurer(const core::Recipe& recipe, const core::Recording& re
     : impl_(std::make_unique<Impl>(recipe, rec, T_world_part, config)) {}
 PartMeasurer::~PartMeasurer() = default;
 
-void PartMeasurer::add_faces(std::size_t first, std::size_t end, const FaceDisplacements& u,
+void PartMeasurer::add_faces(std::size_t first, std::size_t end, const core::FaceDisplacements& u,
                              const FaceUntrusted& untrusted) {
     Impl& m = *impl_;
     const auto find = [](const auto& map, const std::string& name) {
@@ -311,8 +311,9 @@ PartMeasurement PartMeasurer::finish() {
 }
 
 PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& rec,
-                             const Eigen::Isometry3d& T_world_part, const FaceDisplacements& u,
-                             const MeasureConfig& config, const FaceUntrusted& untrusted) {
+                             const Eigen::Isometry3d& T_world_part,
+                             const core::FaceDisplacements& u, const MeasureConfig& config,
+                             const FaceUntrusted& untrusted) {
     PartMeasurer m(recipe, rec, T_world_part, config);
     m.add_faces(0, rec.faces.size(), u, untrusted);
     return m.finish();

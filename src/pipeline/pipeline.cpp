@@ -6,6 +6,9 @@
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
+#include "hotgauge/io/model_io.hpp"
+#include "hotgauge/io/surface_io.hpp"
+
 namespace hotgauge::pipeline {
 namespace {
 
@@ -118,7 +121,7 @@ struct PartRun::Impl {
     const core::Recipe& recipe;
     PipelineOptions o;
     PartResult r;
-    measure::FaceDisplacements u;
+    core::FaceDisplacements u;
     measure::FaceUntrusted untrusted;
     std::optional<measure::PartMeasurer> measurer;  // none: nothing to measure (r says why)
     std::size_t faces_added = 0;
@@ -139,7 +142,7 @@ void PartRun::Impl::compensate(const core::FaceScan& face) {
     r.compensation.push_back({fc.face, fc.applied, fc.degraded, fc.reasons, fc.n_degraded,
                               fc.peak_mm, fc.rms_mm, fc.rate_hz, fc.untrusted});
     for (const auto& why : fc.reasons) r.warnings.push_back(face.name + ": compensation: " + why);
-    if (fc.applied) u.insert_or_assign(face.name, std::move(fc.u_mm));
+    if (fc.applied) u.insert_or_assign(face.name, std::move(fc.displacement_mm));
     if (!fc.untrusted.empty()) untrusted.insert_or_assign(face.name, std::move(fc.untrusted));
     compensate_ms += ms_since(t0);
 }
@@ -152,19 +155,18 @@ std::optional<Eigen::Isometry3d> PartRun::Impl::find_pose() {
         return o.T_world_part;
     }
     const auto t0 = Clock::now();
-    measure::FaceDisplacements u_now = u;
+    core::FaceDisplacements u_now = u;
     if (o.compensate && !rec.faces.empty()) {
         auto fc = compensate::compensate_face(
             record_until_last_profile(rec.faces.back(), o.compensation.clock_offset_s),
             o.compensation);
-        if (fc.applied) u_now.insert_or_assign(rec.faces.back().name, std::move(fc.u_mm));
+        if (fc.applied)
+            u_now.insert_or_assign(rec.faces.back().name, std::move(fc.displacement_mm));
     }
     std::optional<match::Model> built;
     const match::Model* model = o.model;
     if (!model) {
-        match::ModelConfig mc;
-        mc.sampling_mm = recipe.matching.sampling_mm;
-        auto m = match::model_from_recipe(recipe, mc);
+        auto m = part_model(recipe);
         if (!m) {
             r.measurement = measure::unmeasured(recipe, rec, "no part model: " + m.error().message);
             return std::nullopt;
@@ -228,7 +230,7 @@ PartResult PartRun::finish() {
     const std::size_t n = m.rec.faces.size();
     if (m.o.compensate && n > 0) m.compensate(m.rec.faces.back());
     for (const auto& f : m.rec.faces) m.r.faces.push_back(summarize(f));
-    m.r.u_world_mm = m.u;
+    m.r.displacement_mm = m.u;
     if (m.o.compensate) m.r.stage_ms.emplace(m.r.stage_ms.begin(), "compensate", m.compensate_ms);
     if (!m.measurer) return std::move(m.r);
     if (n > m.faces_added) m.add_faces(m.faces_added, n);
@@ -242,6 +244,36 @@ PartResult PartRun::finish() {
             m.r.degraded_reasons.push_back(f.name + ": " + f.reason);
         }
     return std::move(m.r);
+}
+
+core::Result<match::Model> part_model(const core::Recipe& recipe, const ModelSource& source) {
+    if (!source.model_file.empty()) {
+        auto loaded = io::read_model(source.model_file);
+        if (!loaded) return loaded.error();
+        if (loaded->name != recipe.name)
+            return core::make_error(source.model_file.string() + ": model of part '" +
+                                    loaded->name + "', the recipe is '" + recipe.name + "'");
+        return loaded;
+    }
+    match::ModelConfig config;
+    config.sampling_mm = source.sampling_mm.value_or(recipe.matching.sampling_mm);
+    const std::filesystem::path mesh = source.mesh.empty() && source.scan.empty()
+                                           ? std::filesystem::path(recipe.mesh_file)
+                                           : source.mesh;
+    if (mesh.empty() && source.scan.empty()) {
+        auto built = match::model_from_recipe(recipe, config);
+        if (!built)
+            return core::make_error("recipe " + recipe.name +
+                                    ": part model: " + built.error().message);
+        return built;
+    }
+    constexpr double kMeshSpacingMm = 0.5;  // dense samples of a mesh: the ICP surface
+    auto samples = mesh.empty() ? io::read_scan_samples(source.scan)
+                                : io::read_mesh_samples(mesh, kMeshSpacingMm);
+    if (!samples) return samples.error();
+    return match::model_from_samples(
+        recipe.name, mesh.empty() ? "scan " + source.scan.string() : "mesh " + mesh.string(),
+        std::move(samples->points), std::move(samples->normals), config);
 }
 
 PartResult run(const core::Recording& rec, const core::Recipe& recipe, const PipelineOptions& o) {

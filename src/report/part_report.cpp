@@ -296,13 +296,14 @@ core::Result<std::string> face_section(const core::FaceScan& face, std::size_t i
         return s + "</div><p class=\"no-map\">No deviation map: " + escape(why) +
                ".</p></section>\n";
     }
-    const auto u = r.u_world_mm.find(face.name);
-    if (u != r.u_world_mm.end() && static_cast<std::int64_t>(u->second.size()) != face.n_profiles())
+    const auto u = r.displacement_mm.find(face.name);
+    if (u != r.displacement_mm.end() &&
+        static_cast<std::int64_t>(u->second.size()) != face.n_profiles())
         return core::make_error("part " + r.part_id + ", face " + face.name + ": " +
                                 std::to_string(u->second.size()) + " displacements for " +
                                 std::to_string(face.n_profiles()) +
                                 " profiles: the result is not of this recording");
-    const DeviationMap m = deviation_map(face, u != r.u_world_mm.end() ? &u->second : nullptr,
+    const DeviationMap m = deviation_map(face, u != r.displacement_mm.end() ? &u->second : nullptr,
                                          *r.T_world_part, *nominal_hot, config);
     const auto overlays = face_overlays(recipe, r.measurement, face.name, hot_scale(r));
     return s + deviation_figure(m, overlays, colour_scale_mm(recipe), index, config) +

@@ -35,7 +35,7 @@ double hot_scale(const pipeline::PartResult& result) {
 }
 
 DeviationMap deviation_map(const core::FaceScan& face,
-                           const std::vector<Eigen::Vector3d>* u_world_mm,
+                           const std::vector<Eigen::Vector3d>* displacement_mm,
                            const Eigen::Isometry3d& T_world_part,
                            const core::AxisymmetricSolid& nominal_hot,
                            const PartReportConfig& config) {
@@ -48,7 +48,7 @@ DeviationMap deviation_map(const core::FaceScan& face,
     m.deviation_mm.assign(n, kNaN);
     m.r_mm.assign(n, kNaN);
     m.z_mm.assign(n, kNaN);
-    const core::FaceCloud cloud = core::world_cloud(face, u_world_mm);
+    const core::FaceCloud cloud = core::world_cloud(face, displacement_mm);
     const Eigen::Isometry3d T_part_world = T_world_part.inverse();
     const double z_floor = lowest_z(nominal_hot), band = config.support_band_mm;
     // Each point is independent: chunks over the cores, each writing its own pixels.

@@ -108,7 +108,7 @@ core::Result<void> scan_face(const Scene& scene, const CellConfig& cell, const F
                                         rg->clock_offset_ns);
         face.profile_positions_mm.push_back(commanded * rg->travel_scale);
         const Eigen::Vector3d u = vib.displacement_mm(tk);
-        ft.u_mm.push_back(u);
+        ft.displacement_mm.push_back(u);
         const Eigen::Vector3d origin =
             fc.T_world_camera.translation() + commanded * fc.travel_scale * fc.scan_direction + u;
         scene.cast_profile(fc, origin, rng, returns);

@@ -54,16 +54,16 @@ core::Result<void> write_truth(const SimTruth& truth, const std::filesystem::pat
     f << "faces:\n";
     for (const auto& face : truth.faces) {
         double peak = 0.0;
-        for (const auto& u : face.u_mm) peak = std::max(peak, u.norm());
-        f << "  - {name: " << quoted(face.name) << ", profiles: " << face.u_mm.size()
+        for (const auto& u : face.displacement_mm) peak = std::max(peak, u.norm());
+        f << "  - {name: " << quoted(face.name) << ", profiles: " << face.displacement_mm.size()
           << ", spikes: " << face.n_spikes << ", peak_displacement_mm: " << num(peak) << "}\n";
         const auto fdir = dir / face.name;
         std::filesystem::create_directories(fdir, ec);
         if (ec)
             return core::make_error(fdir.string() + ": cannot create directory: " + ec.message());
         std::vector<double> u;
-        for (const auto& v : face.u_mm) u.insert(u.end(), {v.x(), v.y(), v.z()});
-        const auto n = static_cast<std::int64_t>(face.u_mm.size());
+        for (const auto& v : face.displacement_mm) u.insert(u.end(), {v.x(), v.y(), v.z()});
+        const auto n = static_cast<std::int64_t>(face.displacement_mm.size());
         if (auto r = io::write_npy(fdir / "u_true.npy", "<f8", {n, 3}, u.data(), u.size() * 8); !r)
             return r;
         const std::int64_t w = n ? static_cast<std::int64_t>(face.spike.size()) / n : 0;

@@ -70,8 +70,8 @@ struct Scene {
     std::string name;
     core::Recipe recipe;
     sim::SimResult sim;
-    match::FaceDisplacements u;  // true sensor displacement per face (compensation for all three)
-    double growth = 1;           // thermal scale from the recording's temperature (pyrometer)
+    core::FaceDisplacements u;  // true sensor displacement per face (compensation for all three)
+    double growth = 1;          // thermal scale from the recording's temperature (pyrometer)
 };
 
 // hub-a at full resolution (2048 points/profile, 0.2 mm profiles), 1050 °C, vibration as
@@ -95,7 +95,7 @@ Scene make_scene(std::string name, std::vector<std::string> faces) {
         std::abort();
     }
     Scene s{std::move(name), *recipe, std::move(*sim), {}, 1.0};
-    for (const auto& f : s.sim.truth.faces) s.u[f.name] = f.u_mm;
+    for (const auto& f : s.sim.truth.faces) s.u[f.name] = f.displacement_mm;
     s.growth = s.recipe.material.growth(s.sim.recording.temperature_c.value_or(20.0));
 
     std::int64_t valid = 0;
@@ -107,7 +107,7 @@ Scene make_scene(std::string name, std::vector<std::string> faces) {
         face_names += (face_names.empty() ? "" : ",") + f.name;
     }
     for (const auto& f : s.sim.truth.faces)
-        for (const auto& v : f.u_mm) u_peak = std::max(u_peak, v.norm());
+        for (const auto& v : f.displacement_mm) u_peak = std::max(u_peak, v.norm());
     const Eigen::Isometry3d& T = s.sim.truth.T_world_part;
     const double tilt = std::acos(std::clamp(T.linear()(2, 2), -1.0, 1.0)) / kDeg;
     std::printf(

@@ -14,6 +14,8 @@
 #include <span>
 #include <vector>
 
+#include "hotgauge/core/recording.hpp"
+
 namespace hotgauge::accel {
 
 // One accelerometer sample: accelerometer axes, m/s², gravity included.
@@ -130,5 +132,11 @@ class AccelRing {
 enum class HistoryState { complete, arriving, silent };
 HistoryState history_before(const AccelRing& ring, std::int64_t now_ns, std::int64_t margin_ns,
                             std::int64_t in_flight_ns, std::int64_t silent_ns);
+
+// A scanned face's accelerometer record, the one way the tool (hotgauge grab) and the daemon
+// attach it: the samples from `margin_ns` before its first profile to `margin_ns` after its
+// last, as far as they have arrived, replace face.accel_times_ns and face.accel_mps2. Returns
+// the window, for what it says of gaps and coverage.
+AccelWindow attach_face_window(const AccelRing& ring, core::FaceScan& face, std::int64_t margin_ns);
 
 }  // namespace hotgauge::accel

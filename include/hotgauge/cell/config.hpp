@@ -15,6 +15,7 @@
 #include "hotgauge/acquire/scan.hpp"
 #include "hotgauge/acquire/session.hpp"
 #include "hotgauge/cell/quality_feed.hpp"
+#include "hotgauge/compensate/compensate.hpp"
 #include "hotgauge/core/result.hpp"
 #include "hotgauge/plant/mqtt.hpp"
 #include "hotgauge/plc/pyrometer.hpp"
@@ -49,6 +50,15 @@ struct AcquisitionConfig {
     double scan_s = 2.5;                                    // each face's scan
 };
 
+// The pipeline's settings that `hotgauge measure` takes as options, so that the daemon measures
+// as the tool does with the same ones (docs/operations.md "Configuration", `pipeline:`). The
+// part's own (matching.min_score, sampling) are in its recipe.
+struct PipelineSettings {
+    bool compensate = true;  // false: as --no-compensation (with an accelerometer configured)
+    double highpass_hz = compensate::CompensationConfig{}.highpass_hz;  // --highpass-hz
+    int threads = 0;  // --threads: matching and measuring; 0: one per core
+};
+
 struct DaemonConfig {
     std::filesystem::path file;              // where it was read from
     std::filesystem::path calibration_file;  // the cell's measured geometry (calib)
@@ -62,6 +72,7 @@ struct DaemonConfig {
     std::map<int, std::filesystem::path> masters;
     std::vector<std::string> faces;  // scan order for "all faces"
     AcquisitionConfig acquisition;
+    PipelineSettings pipeline;
     std::optional<accel::AccelSourceConfig> accelerometer;  // absent: no compensation
     double accel_margin_s = 0.75;
     // The sensor's sample rate: sizes the ring and sets its gap threshold (a datagram whose

@@ -36,11 +36,11 @@ std::vector<double> integrate_twice(const std::vector<double>& accel, double rat
 
 struct FaceCompensation {
     std::string face;
-    bool applied = false;                        // u is valid for (most) profiles
-    bool degraded = false;                       // some profiles could not be compensated reliably
-    std::vector<std::string> reasons;            // why degraded / not applied
-    std::vector<Eigen::Vector3d> u_mm;           // per profile, world frame (0 where not applied)
-    std::vector<std::uint8_t> profile_degraded;  // per profile: 1 = untrusted
+    bool applied = false;              // displacement_mm is valid for (most) profiles
+    bool degraded = false;             // some profiles could not be compensated reliably
+    std::vector<std::string> reasons;  // why degraded / not applied
+    std::vector<Eigen::Vector3d> displacement_mm;  // per profile, world frame (0 where not applied)
+    std::vector<std::uint8_t> profile_degraded;    // per profile: 1 = untrusted
     std::int64_t n_degraded = 0;
     std::vector<core::UntrustedProfiles> untrusted;  // the same as runs, with their cause
     double peak_mm = 0.0, rms_mm = 0.0;              // of |u| over the profiles

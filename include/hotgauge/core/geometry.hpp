@@ -18,10 +18,10 @@ struct FaceCloud {
     std::vector<std::int32_t> column;   // i of each point
 };
 
-// World points of every valid (non-NaN) profile point. With `u_world_mm` (one world-frame sensor
-// displacement per profile, mm) each profile is moved by +u (the compensation sign convention of
-// recording-format-v1); without it the nominal cloud is returned.
+// World points of every valid (non-NaN) profile point. With `displacement_mm` (one world-frame
+// sensor displacement per profile, mm) each profile is moved by +u (the compensation sign
+// convention of recording-format-v1); without it the nominal cloud is returned.
 FaceCloud world_cloud(const FaceScan& face,
-                      const std::vector<Eigen::Vector3d>* u_world_mm = nullptr);
+                      const std::vector<Eigen::Vector3d>* displacement_mm = nullptr);
 
 }  // namespace hotgauge::core

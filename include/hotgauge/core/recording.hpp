@@ -61,6 +61,11 @@ std::string describe(const std::string& face, const UntrustedProfiles& u);
 // Per face, its untrusted runs; a face not in it is trusted throughout.
 using FaceUntrusted = std::map<std::string, std::vector<UntrustedProfiles>>;
 
+// Per face, the sensor's displacement at each profile (world frame, mm) as the compensation
+// found it; the match and the measurement move the face's points back by it. A face not in it
+// is taken as it was scanned.
+using FaceDisplacements = std::map<std::string, std::vector<Eigen::Vector3d>>;
+
 struct Recording {
     std::string part_id;
     std::string recipe;

@@ -50,11 +50,9 @@ struct MatchResult {
     std::vector<std::pair<std::string, double>> stage_ms;
 };
 
-using FaceDisplacements = std::map<std::string, std::vector<Eigen::Vector3d>>;
-
 // Finds the model in the faces of `rec` (world frame; each face moved by its compensation `u`
 // when given). Never reports a pose as found when its score is below the threshold.
-MatchResult match(const Model& model, const core::Recording& rec, const FaceDisplacements& u,
+MatchResult match(const Model& model, const core::Recording& rec, const core::FaceDisplacements& u,
                   const MatchConfig& config = {});
 
 // For an axisymmetric model: the pose with the same axis and origin, spun about the axis to the

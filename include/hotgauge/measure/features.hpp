@@ -110,7 +110,6 @@ struct PartMeasurement {
 };
 
 // Per-face world displacement of the sensor per profile (compensation); absent = none.
-using FaceDisplacements = std::map<std::string, std::vector<Eigen::Vector3d>>;
 // Per face, the runs of profiles the compensation could not follow; absent = all trusted.
 using FaceUntrusted = core::FaceUntrusted;
 
@@ -120,7 +119,7 @@ using FaceUntrusted = core::FaceUntrusted;
 // with a reason.
 PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& rec,
                              const Eigen::Isometry3d& T_world_part,
-                             const FaceDisplacements& u_world_mm = {},
+                             const core::FaceDisplacements& displacement_mm = {},
                              const MeasureConfig& config = {}, const FaceUntrusted& untrusted = {});
 
 // Every measured feature of `m` degraded because of `why` (a face left out, so the pose was
@@ -146,7 +145,7 @@ class PartMeasurer {
     // Prepares faces [first, end) of `rec` (over the cores) with their displacement and
     // untrusted runs from `u` and `untrusted` (a face absent there: none), then measures the
     // features they complete.
-    void add_faces(std::size_t first, std::size_t end, const FaceDisplacements& u,
+    void add_faces(std::size_t first, std::size_t end, const core::FaceDisplacements& u,
                    const FaceUntrusted& untrusted);
     // The features of faces never added are not measured (naming the face); cold values and
     // verdicts for all.

@@ -2,6 +2,7 @@
 // The one pipeline function the offline tool and the daemon share: recording in, part result out
 // (docs/architecture.md). Stages: [compensation] → pose → measurement → thermal scaling.
 #include <Eigen/Geometry>
+#include <filesystem>
 #include <memory>
 #include <optional>
 #include <string>
@@ -11,6 +12,7 @@
 #include "hotgauge/compensate/compensate.hpp"
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/recording.hpp"
+#include "hotgauge/core/result.hpp"
 #include "hotgauge/match/match.hpp"
 #include "hotgauge/measure/features.hpp"
 
@@ -28,7 +30,7 @@ struct PipelineOptions {
     measure::MeasureConfig measure;
 };
 
-// What compensation did on one face (its per-profile u is PartResult::u_world_mm).
+// What compensation did on one face (its per-profile u is PartResult::displacement_mm).
 struct FaceCompensationSummary {
     std::string face;
     bool applied = false, degraded = false;
@@ -66,13 +68,26 @@ struct PartResult {
     // the pose (none: nothing measured) and each face's displacement per profile (a face absent:
     // not compensated).
     std::optional<Eigen::Isometry3d> T_world_part;
-    measure::FaceDisplacements u_world_mm;
+    core::FaceDisplacements displacement_mm;
     std::vector<std::string> warnings;                     // reader findings, degraded conditions
     std::vector<std::pair<std::string, double>> stage_ms;  // wall time per stage
 };
 
 PartResult run(const core::Recording& rec, const core::Recipe& recipe,
                const PipelineOptions& options);
+
+// Where a part's PPF model comes from (docs/model-file.md), first match wins: a saved model
+// file; a mesh (PLY/STL) or a reference scan (PLY/PCD); the recipe's geometry.mesh_file; the
+// recipe's sections.
+struct ModelSource {
+    std::filesystem::path model_file, mesh, scan;
+    std::optional<double> sampling_mm;  // default: the recipe's matching.sampling_mm
+};
+
+// The part's PPF model, the one way the tool (measure, model build) and the daemon get it: a
+// model file is read and checked to be the recipe's part; otherwise the model is built. The
+// error names the file or the recipe.
+core::Result<match::Model> part_model(const core::Recipe& recipe, const ModelSource& source = {});
 
 // run() in steps, so that a cell has its answer soon after the last profile (docs/architecture.md
 // "Latency"). The constructor and measure_all_but_last() need of the last face's accelerometer

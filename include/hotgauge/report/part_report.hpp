@@ -45,11 +45,11 @@ struct DeviationMap {
 // or, without a temperature, the scale the matching estimated (1 when neither is known).
 double hot_scale(const pipeline::PartResult& result);
 
-// Each valid point of `face`, moved by its profile's compensation displacement `u_world_mm` (one
-// per profile, or none), taken to the part frame with `T_world_part` and compared with
+// Each valid point of `face`, moved by its profile's compensation displacement `displacement_mm`
+// (one per profile, or none), taken to the part frame with `T_world_part` and compared with
 // `nominal_hot` (core::AxisymmetricSolid::from_recipe(recipe, {}, {}, hot_scale(result))).
 DeviationMap deviation_map(const core::FaceScan& face,
-                           const std::vector<Eigen::Vector3d>* u_world_mm,
+                           const std::vector<Eigen::Vector3d>* displacement_mm,
                            const Eigen::Isometry3d& T_world_part,
                            const core::AxisymmetricSolid& nominal_hot,
                            const PartReportConfig& config = {});

@@ -111,8 +111,8 @@ struct FeatureTruth {
 
 struct FaceTruth {
     std::string name;
-    std::vector<Eigen::Vector3d> u_mm;  // true sensor displacement per profile, world
-    std::vector<std::uint8_t> spike;    // N*W: 1 where the point is a simulated spike
+    std::vector<Eigen::Vector3d> displacement_mm;  // true sensor displacement per profile, world
+    std::vector<std::uint8_t> spike;               // N*W: 1 where the point is a simulated spike
     std::int64_t n_spikes = 0;
 };
 
