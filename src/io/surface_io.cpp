@@ -3,7 +3,7 @@
 // triangle), PCD v0.7 (pointclouds.org/documentation/tutorials/pcd_file_format.html).
 #include "hotgauge/io/surface_io.hpp"
 
-#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -11,8 +11,6 @@
 #include <charconv>
 #include <cmath>
 #include <cstdint>
-#include <exception>
-#include <flann/flann.hpp>
 #include <limits>
 #include <optional>
 #include <random>
@@ -21,6 +19,7 @@
 #include <string_view>
 
 #include "file_bytes.hpp"
+#include "hotgauge/match/normals.hpp"
 
 namespace hotgauge::io {
 namespace {
@@ -31,7 +30,6 @@ using core::Result;
 
 constexpr std::uint64_t kSamplingSeed = 20240517;  // any fixed value: reproducible models
 constexpr double kMaxSamples = 5e7;                // beyond this the spacing is a mistake
-constexpr std::size_t kNormalNeighbours = 12;      // PCA neighbourhood, the point excluded
 
 std::string lower(std::string_view s) {
     std::string out(s);
@@ -683,54 +681,6 @@ Result<RawScan> read_pcd(const std::vector<unsigned char>& b, const std::string&
     return out;
 }
 
-// PCA normals of the kNormalNeighbours nearest points (exact k-d tree search), towards +z.
-// Points whose neighbourhood is a line or a single point get no normal and are dropped.
-Result<SurfaceSamples> estimate_normals(const std::vector<Eigen::Vector3f>& points,
-                                        const std::string& where) {
-    const std::size_t n = points.size();
-    std::vector<float> flat;
-    flat.reserve(3 * n);
-    for (const Eigen::Vector3f& p : points) flat.insert(flat.end(), {p.x(), p.y(), p.z()});
-    const std::size_t k = std::min(n, kNormalNeighbours + 1);  // the point itself comes first
-    constexpr std::size_t kBatch = 1 << 16;
-    std::vector<std::size_t> idx(std::min(n, kBatch) * k);
-    std::vector<float> dist(idx.size());
-    SurfaceSamples out;
-    try {
-        flann::Matrix<float> data(flat.data(), n, 3);
-        flann::Index<flann::L2_Simple<float>> index(data, flann::KDTreeSingleIndexParams(15));
-        index.buildIndex();
-        flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED);
-        for (std::size_t first = 0; first < n; first += kBatch) {
-            const std::size_t m = std::min(kBatch, n - first);
-            flann::Matrix<float> queries(flat.data() + 3 * first, m, 3);
-            flann::Matrix<std::size_t> indices(idx.data(), m, k);
-            flann::Matrix<float> dists(dist.data(), m, k);
-            index.knnSearch(queries, indices, dists, k, params);
-            for (std::size_t q = 0; q < m; ++q) {
-                Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-                for (std::size_t j = 0; j < k; ++j) mean += points[idx[q * k + j]].cast<double>();
-                mean /= static_cast<double>(k);
-                Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-                for (std::size_t j = 0; j < k; ++j) {
-                    const Eigen::Vector3d d = points[idx[q * k + j]].cast<double>() - mean;
-                    cov += d * d.transpose();
-                }
-                const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
-                const Eigen::Vector3d ev = eig.eigenvalues();  // ascending
-                if (!(ev[1] > 1e-12 * ev[2])) continue;        // a line or a point: no plane
-                Eigen::Vector3d normal = eig.eigenvectors().col(0);
-                if (normal.z() < 0) normal = -normal;
-                out.points.push_back(points[first + q]);
-                out.normals.push_back(normal.cast<float>());
-            }
-        }
-    } catch (const std::exception& e) {
-        return make_error(where + "normal estimation failed: " + e.what());
-    }
-    return out;
-}
-
 Result<SurfaceSamples> finish_scan(const RawScan& raw, const std::string& where) {
     const bool has_normals = !raw.normals.empty();
     SurfaceSamples s;
@@ -747,10 +697,11 @@ Result<SurfaceSamples> finish_scan(const RawScan& raw, const std::string& where)
         return make_error(where + std::to_string(s.points.size()) + " valid points of " +
                           std::to_string(raw.points.size()) + ": not a surface");
     if (has_normals) return s;
-    auto estimated = estimate_normals(s.points, where);
-    if (estimated && estimated->points.size() < 3)
+    auto estimated = match::estimate_normals(s.points);
+    if (!estimated) return make_error(where + estimated.error().message);
+    if (estimated->points.size() < 3)
         return make_error(where + "no surface: the points lie on a line");
-    return estimated;
+    return SurfaceSamples{std::move(estimated->points), std::move(estimated->normals)};
 }
 
 }  // namespace
