@@ -88,6 +88,19 @@ echo "not a model" > "$tmp/text.hgm"
 expect_error "$tmp/text.hgm: not a hotgauge model file" info "$tmp/text.hgm"
 expect_error "$tmp/none.hgm: no such file" info "$tmp/none.hgm"
 expect_error "$tmp/none.stl: no such file" build --mesh "$tmp/none.stl" --out "$tmp/x.hgm"
+# Files PCL (PLY, PCD) or VTK (STL) cannot read: our one line naming the file, nothing of
+# theirs on stderr (pcl::console silenced, VTK's errors caught by an observer).
+echo "not a mesh" > "$tmp/text.ply"
+expect_error "$tmp/text.ply: PCL cannot read it as PLY" build --mesh "$tmp/text.ply" --out "$tmp/x.hgm"
+[ "$(wc -l < "$tmp/err")" -eq 1 ] || fail "PLY error is more than one line: $(cat "$tmp/err")"
+printf 'solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 zero\n' > "$tmp/bad.stl"
+expect_error "$tmp/bad.stl: VTK cannot read it as STL: at line 4: Parse error reading STL vertex" \
+  build --mesh "$tmp/bad.stl" --out "$tmp/x.hgm"
+[ "$(wc -l < "$tmp/err")" -eq 1 ] || fail "STL error is more than one line: $(cat "$tmp/err")"
+printf 'VERSION 0.7\nFIELDS x y w\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2 3\n' \
+  > "$tmp/noz.pcd"
+expect_error "$tmp/noz.pcd: PCD has no x, y, z fields" build --scan "$tmp/noz.pcd" --out "$tmp/x.hgm"
+[ "$(wc -l < "$tmp/err")" -eq 1 ] || fail "PCD error is more than one line: $(cat "$tmp/err")"
 expect_error "$tmp/none.yaml" build --recipe "$tmp/none.yaml" --out "$tmp/x.hgm"
 expect_error "$tmp/no/dir/x.hgm.tmp: cannot open for writing" build --out "$tmp/no/dir/x.hgm"
 [ ! -e "$tmp/x.hgm" ] || fail "a failed build left a model file"
