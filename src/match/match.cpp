@@ -48,7 +48,8 @@ std::size_t reference_stride(std::size_t n, int max_refs) {
 }
 
 // Hough voting: per scene reference point, an accumulator over (model reference × α).
-std::vector<Candidate> vote(const Model& model, const detail::Samples& scene, int max_refs) {
+std::vector<Candidate> vote(const Model& model, const detail::Samples& scene, int max_refs,
+                            int threads) {
     const int A = model.config.alpha_bins;
     const float bin = 2.0f * std::numbers::pi_v<float> / static_cast<float>(A);
     const float inv_bin = 1.0f / bin;
@@ -78,8 +79,8 @@ std::vector<Candidate> vote(const Model& model, const detail::Samples& scene, in
     struct Scratch {
         std::vector<std::uint32_t> acc, folded;
     };
-    std::vector<Scratch> scratch(core::worker_count());
-    core::parallel_for(n_refs, 0, [&](std::size_t ref, unsigned worker) {
+    std::vector<Scratch> scratch(core::worker_count(threads));
+    core::parallel_for(n_refs, threads, [&](std::size_t ref, unsigned worker) {
         auto& acc = scratch[worker].acc;
         auto& folded = scratch[worker].folded;
         acc.assign(model.refs.size() * row, 0);
@@ -214,7 +215,7 @@ MatchResult match(const Model& model, const core::Recording& rec, const core::Fa
     detail::Samples scene;
     std::vector<Eigen::Vector3f> dense;
     std::optional<detail::Surface> surface_built;
-    core::parallel_for(3, 0, [&](std::size_t job, unsigned) {
+    core::parallel_for(3, cfg.threads, [&](std::size_t job, unsigned) {
         if (job == 0)
             scene = detail::voting_samples(rec, u, sampling, cfg.normal_radius_mm);
         else if (job == 1)
@@ -252,7 +253,7 @@ MatchResult match(const Model& model, const core::Recording& rec, const core::Fa
     }
 
     const auto t1 = Clock::now();
-    auto cands = vote(model, scene, cfg.max_reference_points);
+    auto cands = vote(model, scene, cfg.max_reference_points, cfg.threads);
     const std::size_t stride = reference_stride(scene.points.size(), cfg.max_reference_points);
     res.reference_points = static_cast<std::int64_t>((scene.points.size() + stride - 1) / stride);
     const double dist = cfg.cluster_distance_mm > 0 ? cfg.cluster_distance_mm : 2.0 * sampling;

@@ -25,13 +25,16 @@ struct MatchConfig {
     double icp_grid_mm = 1.5;  // dense ICP samples: the scan grid thinned to this pitch
     int icp_max_iterations = 30;
     double icp_stop_mm = 1e-4;  // stop when the largest point motion is below this
-    double icp_stop_deg = 1e-4;
     // Verdict
     double inlier_band_mm = 0.3;  // a scan point this close to the fitted surface supports it
     double min_score = 0.6;       // found when score >= this (recipe matching.min_score)
     std::int64_t min_inliers = 500;
     // Model scale (thermal growth): fixed when known, else estimated by ICP.
     std::optional<double> scale;
+    // Voting and the scene preparation run on this many threads (0: one per core). Each piece's
+    // result is kept apart and combined in one order, so the pose does not depend on it
+    // (tests/test_threads.cpp).
+    int threads = 0;
 };
 
 struct MatchResult {

@@ -28,6 +28,8 @@ struct PipelineOptions {
     bool compensate = true;    // vibration compensation (--no-compensation)
     compensate::CompensationConfig compensation;
     measure::MeasureConfig measure;
+    // The threads are match.threads and measure.threads (both 0, one per core, by default;
+    // --threads sets both); the result is the same to the bit on any number of them.
 };
 
 // What compensation did on one face (its per-profile u is PartResult::displacement_mm).
