@@ -62,6 +62,8 @@ std::optional<pipeline::PartResult> measure_job(const MeasureJob& a, core::Recor
     opt.compensate = !a.no_compensation;
     opt.compensation.clock_offset_s = a.clock_offset_ms * 1e-3;
     if (a.highpass_hz > 0) opt.compensation.highpass_hz = a.highpass_hz;
+    opt.match.threads = a.threads;
+    opt.measure.threads = a.threads;
     std::string pose_file = a.part_pose;
     if (a.pose == "truth") {
         if (!pose_file.empty()) {
@@ -147,6 +149,11 @@ void add_measure_job_options(CLI::App* s, MeasureJob& j) {
         ->capture_default_str();
     s->add_option("--highpass-hz", j.highpass_hz,
                   "compensation high-pass corner, Hz (default 1.5)");
+    s->add_option("--threads", j.threads,
+                  "threads for matching and measurement, 0: one per core (the numbers are the "
+                  "same on any number)")
+        ->check(CLI::Range(0, 64))
+        ->capture_default_str();
     s->add_option("--calibration", j.calibration,
                   "calibration.yaml: the cell's geometry replaces the recording's face.yaml "
                   "(docs/calibration.md)");

@@ -40,6 +40,7 @@ struct MeasureJob {
     bool no_compensation = false;
     double clock_offset_ms = 0.0;
     double highpass_hz = 0.0;
+    int threads = 0;  // matching and measurement (0: one per core); the numbers do not change
     std::optional<double> default_temperature_c;  // when the recording has none (a cold master)
 };
 void add_measure_job_options(CLI::App* command, MeasureJob& job);
