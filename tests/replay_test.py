@@ -40,7 +40,7 @@ PART_ID = 250001
 # The daemon's pipeline settings (docs/operations.md "Configuration") and the same as options of
 # `hotgauge measure`: a non-default high-pass corner and threads, which must give the same features.
 PIPELINE = "pipeline: {highpass_hz: 2.5, threads: 2}\n"
-MEASURE_OPTIONS = ("--highpass-hz", "2.5")
+MEASURE_OPTIONS = ("--highpass-hz", "2.5", "--threads", "1")
 TOLERANCE_UM = 1.0
 
 

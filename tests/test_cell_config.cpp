@@ -168,7 +168,7 @@ TEST(DaemonConfig, PipelineSettingsAsTheToolTakesThem) {
               std::string::npos)
         << e;
     e = error_with("  threads: 0 ", "  threads: -1 ", &line);
-    EXPECT_NE(e.find(":" + std::to_string(line) + ": pipeline.threads: must be in 0..256"),
+    EXPECT_NE(e.find(":" + std::to_string(line) + ": pipeline.threads: must be in 0..64"),
               std::string::npos)
         << e;
     e = error_with("  compensation: true ", "  compensation: maybe ", &line);

@@ -208,7 +208,7 @@ PipelineSettings read_pipeline(const YamlReader& y, const YAML::Node& p) {
     s.highpass_hz = positive(y, p, w, "highpass_hz", s.highpass_hz);
     if (s.highpass_hz > 50.0)  // the scans' vibration is 2-50 Hz (docs/compensation.md)
         y.fail(p["highpass_hz"], w + ".highpass_hz: at most 50 Hz");
-    s.threads = integer_in(y, p, w, "threads", 0, 256, s.threads);
+    s.threads = integer_in(y, p, w, "threads", 0, 64, s.threads);  // as hotgauge measure's
     return s;
 }
 

@@ -873,6 +873,7 @@ pipeline::PartResult Daemon::Impl::measure_captured(Captured& c) const {
     // `hotgauge measure --no-compensation` (a warning, not every feature degraded).
     opt.compensate = accel != nullptr && ps.compensate;
     opt.compensation.highpass_hz = ps.highpass_hz;
+    opt.match.threads = ps.threads;
     opt.measure.threads = ps.threads;
     if (accel) refresh_last_face(c, c.last_profile_ns + ring->period_ns(), 0.2);
     pipeline::PartRun run(c.rec, *job.recipe, opt);

@@ -290,6 +290,13 @@ std::string Publisher::Impl::reason(int rc, int err) const {
     if (rc == MOSQ_ERR_KEEPALIVE)  // "Unknown error." in mosquitto_strerror() of 2.0.11
         words = "no answer within the keepalive of " + std::to_string(config.keepalive_s) + " s";
     if (rc == MOSQ_ERR_CONN_LOST) words = "closed by the broker";
+    // TLS 1.3 without the client certificate the broker requires: its alert comes after the
+    // handshake, and is read now and then as a protocol error (EPROTO) before CONNACK.
+    const bool protocol = rc == MOSQ_ERR_PROTOCOL || (rc == MOSQ_ERR_ERRNO && err == EPROTO);
+    if (protocol && !connected && !config.tls.ca_file.empty())
+        words =
+            "the broker ended the connection after the TLS handshake (does it require a "
+            "client certificate?)";
     if (!library_error.empty()) words += " (" + library_error + ")";
     return words;
 }
