@@ -215,7 +215,7 @@ PipelineSettings read_pipeline(const YamlReader& y, const YAML::Node& p) {
 // A topic level: not empty, and none of MQTT's separators or wildcards.
 std::string topic_level(const YamlReader& y, const YAML::Node& m, const char* key) {
     const std::string v = y.string(y.require(m, "mqtt", key), std::string("mqtt.") + key);
-    if (v.empty() || v.find_first_of("/+#") != std::string::npos)
+    if (!plant::valid_topic_level(v))
         y.fail(m[key],
                std::string("mqtt.") + key + ": a topic level: not empty, without '/', '+' or '#'");
     return v;

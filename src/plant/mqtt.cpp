@@ -17,7 +17,7 @@
 #include <sstream>
 #include <thread>
 
-#include "hotgauge/core/log.hpp"
+#include "log.hpp"
 
 namespace hotgauge::plant {
 namespace {
@@ -25,10 +25,7 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-spdlog::logger& log() {
-    static const auto logger = core::module_logger("plant");
-    return *logger;
-}
+using detail::log;
 
 // Process-wide and not thread-safe in libmosquitto; never undone (mosquitto_lib_cleanup would
 // pull OpenSSL from under another publisher).
@@ -63,13 +60,8 @@ core::Result<std::string> read_password(const fs::path& file) {
     return password;
 }
 
-// A topic level must not hold the separators or wildcards of MQTT (§4.7).
-bool valid_level(const std::string& s) {
-    return !s.empty() && s.find_first_of("/+#") == std::string::npos;
-}
-
 core::Result<void> validate(const MqttConfig& c) {
-    if (!valid_level(c.site) || !valid_level(c.cell))
+    if (!valid_topic_level(c.site) || !valid_topic_level(c.cell))
         return core::make_error("mqtt.site and mqtt.cell: must be set, without '/', '+' or '#'");
     if (c.port <= 0 || c.port > 65535) return core::make_error("mqtt.port: must be 1 to 65535");
     // libmosquitto refuses keepalives of 1 to 4 s (mosquitto__connect_init).
@@ -393,6 +385,10 @@ void Publisher::Impl::shutdown() {
     }
     mosquitto_destroy(mosq);
     mosq = nullptr;
+}
+
+bool valid_topic_level(std::string_view level) {
+    return !level.empty() && level.find_first_of("/+#") == std::string_view::npos;
 }
 
 core::Result<std::unique_ptr<Publisher>> Publisher::start(const MqttConfig& config) {

@@ -9,17 +9,14 @@
 #include <cstring>
 #include <vector>
 
-#include "hotgauge/core/log.hpp"
+#include "log.hpp"
 
 namespace hotgauge::plant {
 namespace {
 
 namespace fs = std::filesystem;
 
-spdlog::logger& log() {
-    static const auto logger = core::module_logger("plant");
-    return *logger;
-}
+using detail::log;
 
 std::string errno_text() { return std::strerror(errno); }
 

@@ -44,6 +44,9 @@ struct MqttConfig {
     SpoolConfig spool;
 };
 
+// A site or cell name as a topic level: not empty, without MQTT's separator or wildcards (§4.7).
+bool valid_topic_level(std::string_view level);
+
 // What the publisher is doing: health, metrics, the status page.
 struct PublisherStatus {
     bool connected = false;
