@@ -82,8 +82,9 @@ PartResult run(const core::Recording& rec, const core::Recipe& recipe,
 // file; a mesh (PLY/STL) or a reference scan (PLY/PCD); the recipe's geometry.mesh_file; the
 // recipe's sections.
 struct ModelSource {
-    std::filesystem::path model_file, mesh, scan;
-    std::optional<double> sampling_mm;  // default: the recipe's matching.sampling_mm
+    // Initialized, so that a caller names only the source it has ({.model_file = f}).
+    std::filesystem::path model_file{}, mesh{}, scan{};
+    std::optional<double> sampling_mm{};  // default: the recipe's matching.sampling_mm
 };
 
 // The part's PPF model, the one way the tool (measure, model build) and the daemon get it: a
