@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <set>
 
 #include "hotgauge/io/yaml_reader.hpp"
@@ -95,13 +96,76 @@ FeatureSpec read_feature(const YamlReader& y, const YAML::Node& n, const std::st
         for (const char* k : {"section", "edge_at"})
             if (n[k]) y.fail(n[k], w + "." + k + ": not used by a height feature");
         expected = std::abs(*r.level(f.to_level) - *r.level(f.from_level));
+    } else if (kind == "die_shift") {
+        f.kind = FeatureKind::kDieShift;
+        if (!r.forging)
+            y.fail(n["kind"], w + ".kind: a die_shift feature needs the recipe's 'forging' "
+                                  "drawing (its parting plane)");
+        for (const char* k : {"section", "edge_at", "from", "to", "method"})
+            if (n[k]) y.fail(n[k], w + "." + k + ": not used by a die_shift feature");
+        if (f.tol_lower_mm != 0.0)
+            y.fail(n["tolerance_mm"], w + ".tolerance_mm: a die shift is a distance, its lower "
+                                          "tolerance is 0");
     } else {
-        y.fail(n["kind"], w + ".kind: expected 'diameter' or 'height', found '" + kind + "'");
+        y.fail(n["kind"],
+               w + ".kind: expected 'diameter', 'height' or 'die_shift', found '" + kind + "'");
     }
     if (std::abs(expected - f.nominal_mm) > kNominalCheckMm)
         y.fail(n["nominal_mm"], w + ".nominal_mm: " + std::to_string(f.nominal_mm) +
                                     " disagrees with the geometry (" + std::to_string(expected) +
                                     ")");
+    return f;
+}
+
+// A mapping of names (sections or levels) to a non-negative number at most `max`.
+std::map<std::string, double> read_named(const YamlReader& y, const YAML::Node& m,
+                                         const std::string& what, double max, bool level,
+                                         const Recipe& r) {
+    if (!m.IsMap()) y.fail(m, what + ": expected a mapping of name to value");
+    std::map<std::string, double> out;
+    for (const auto& kv : m) {
+        const auto name = kv.first.as<std::string>();
+        const std::string w = what + "." + name;
+        if (level ? !r.level(name) : !r.section(name))
+            y.fail(kv.first, w + ": unknown " + (level ? "level" : "section") + " '" + name + "'");
+        const double v = y.number(kv.second, w);
+        if (!(v >= 0.0 && v <= max))
+            y.fail(kv.second, w + ": expected 0 .. " + std::to_string(max));
+        out[name] = v;
+    }
+    return out;
+}
+
+// The forging drawing's notes: parting plane, draft, fillets, die shift (docs/recipes.md).
+core::ForgingSpec read_forging(const YamlReader& y, const YAML::Node& m, const Recipe& r) {
+    y.expect_map(m, "forging",
+                 {"parting_z_mm", "draft_deg", "fillet_mm", "die_shift_mm", "section_draft_deg",
+                  "level_fillet_mm"});
+    core::ForgingSpec f;
+    f.parting_z_mm = y.number(y.require(m, "forging", "parting_z_mm"), "forging.parting_z_mm");
+    double z_lo = 1e300, z_hi = -1e300;
+    for (const auto& [name, z] : r.levels_mm) {
+        z_lo = std::min(z_lo, z);
+        z_hi = std::max(z_hi, z);
+    }
+    if (!(f.parting_z_mm > z_lo && f.parting_z_mm < z_hi))
+        y.fail(m["parting_z_mm"], "forging.parting_z_mm: must lie inside the part (" +
+                                      std::to_string(z_lo) + " .. " + std::to_string(z_hi) + ")");
+    auto bounded = [&](const char* key, double max) {
+        const double v = y.number_or(m, "forging", key, 0.0);
+        if (!(v >= 0.0 && v <= max))
+            y.fail(m[key], std::string("forging.") + key + ": expected 0 .. " + std::to_string(max));
+        return v;
+    };
+    f.draft_deg = bounded("draft_deg", 10.0);
+    f.fillet_mm = bounded("fillet_mm", 20.0);
+    f.die_shift_mm = bounded("die_shift_mm", 5.0);
+    if (m["section_draft_deg"])
+        f.section_draft_deg =
+            read_named(y, m["section_draft_deg"], "forging.section_draft_deg", 10.0, false, r);
+    if (m["level_fillet_mm"])
+        f.level_fillet_mm =
+            read_named(y, m["level_fillet_mm"], "forging.level_fillet_mm", 20.0, true, r);
     return f;
 }
 
@@ -112,7 +176,8 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
     return y.guarded<Recipe>([&] {
         const YAML::Node root = y.load();
         y.expect_map(root, "recipe",
-                     {"part", "description", "geometry", "material", "matching", "features"});
+                     {"part", "description", "geometry", "material", "matching", "forging",
+                      "features"});
         Recipe r;
         r.source = file.string();
         r.name = y.string(y.require(root, "recipe", "part"), "part");
@@ -166,6 +231,8 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
             if (!(r.matching.min_score > 0.0 && r.matching.min_score < 1.0))
                 y.fail(m["min_score"], "matching.min_score: expected a fraction in (0, 1)");
         }
+
+        if (const YAML::Node m = root["forging"]) r.forging = read_forging(y, m, r);
 
         const YAML::Node fl = y.require(root, "recipe", "features");
         if (!fl.IsSequence()) y.fail(fl, "features: expected a list");

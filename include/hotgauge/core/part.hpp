@@ -26,7 +26,9 @@ struct Section {
     double diameter_mm = 0.0;
 };
 
-enum class FeatureKind { kDiameter, kHeight };
+// kDieShift: the distance, perpendicular to the axis, between the axes of the part's upper half
+// (above the parting plane) and its lower half (hub-a.md "As forged"); nominal 0.
+enum class FeatureKind { kDiameter, kHeight, kDieShift };
 enum class HeightMethod { kPlanes, kEdges };  // fitted parallel planes, or edges along the axis
 
 struct FeatureSpec {
@@ -51,6 +53,28 @@ struct MatchingSpec {
     double min_score = 0.8;    // fraction of scan points near the part that lie on the model
 };
 
+// What the forging drawing allows (docs/recipes.md "The forging drawing"); recipe key `forging`.
+// These are limits, not the part: the measurement finds each part's own draft and radii within
+// them (a sharp, vertical part is one legal case). Features stay defined at the theoretical
+// sharp corners. A recipe without the key describes sharp corners and vertical walls on one axis.
+struct ForgingSpec {
+    double parting_z_mm = 0.0;  // the parting plane, part frame, cold
+    double draft_deg = 0.0;     // largest draft of a wall ("draft ≤ 3°")
+    double fillet_mm = 0.0;     // largest fillet radius of a corner ("R ≤ 2.5")
+    double die_shift_mm = 0.0;  // largest die shift the drawing allows
+    std::map<std::string, double> section_draft_deg;  // per section, where the drawing says
+    std::map<std::string, double> level_fillet_mm;    // per level (both its corners)
+
+    double draft_of(const std::string& section) const {
+        const auto it = section_draft_deg.find(section);
+        return it == section_draft_deg.end() ? draft_deg : it->second;
+    }
+    double fillet_at(const std::string& level) const {
+        const auto it = level_fillet_mm.find(level);
+        return it == level_fillet_mm.end() ? fillet_mm : it->second;
+    }
+};
+
 struct Recipe {
     std::string name;
     std::string source;     // file it came from, for messages
@@ -59,7 +83,16 @@ struct Recipe {
     std::vector<Section> outer, inner;
     ThermalModel material;
     MatchingSpec matching;
+    std::optional<ForgingSpec> forging;  // absent: sharp corners, vertical walls, one axis
     std::vector<FeatureSpec> features;
+
+    // Upper bound of the fillet radius at a level's corners (0 without a forging drawing).
+    double fillet_at(const std::string& level_name) const {
+        return forging ? forging->fillet_at(level_name) : 0.0;
+    }
+    double draft_of(const std::string& section_name) const {
+        return forging ? forging->draft_of(section_name) : 0.0;
+    }
 
     std::optional<double> level(const std::string& level_name) const;
     const Section* section(const std::string& section_name) const;
