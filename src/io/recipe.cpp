@@ -154,7 +154,8 @@ core::ForgingSpec read_forging(const YamlReader& y, const YAML::Node& m, const R
     auto bounded = [&](const char* key, double max) {
         const double v = y.number_or(m, "forging", key, 0.0);
         if (!(v >= 0.0 && v <= max))
-            y.fail(m[key], std::string("forging.") + key + ": expected 0 .. " + std::to_string(max));
+            y.fail(m[key],
+                   std::string("forging.") + key + ": expected 0 .. " + std::to_string(max));
         return v;
     };
     f.draft_deg = bounded("draft_deg", 10.0);
@@ -175,9 +176,9 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
     const YamlReader y(file.string());
     return y.guarded<Recipe>([&] {
         const YAML::Node root = y.load();
-        y.expect_map(root, "recipe",
-                     {"part", "description", "geometry", "material", "matching", "forging",
-                      "features"});
+        y.expect_map(
+            root, "recipe",
+            {"part", "description", "geometry", "material", "matching", "forging", "features"});
         Recipe r;
         r.source = file.string();
         r.name = y.string(y.require(root, "recipe", "part"), "part");

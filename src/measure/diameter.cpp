@@ -5,6 +5,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "corner.hpp"
 #include "edges.hpp"
 #include "feature_kinds.hpp"
 
@@ -12,18 +13,6 @@ namespace hotgauge::measure::detail {
 namespace {
 
 using Pair2d = std::pair<Eigen::Vector2d, Eigen::Vector2d>;
-
-// The level's plane, its normal towards the sensor, and a 2D frame in it for circle fits.
-struct EdgePlane {
-    PlaneFit plane;
-    double thr = 0;              // on-plane threshold
-    double profile_scatter = 0;  // profiles' offsets from the plane beyond noise
-    Eigen::Vector3d e1, e2;
-    Eigen::Vector2d to2d(const Eigen::Vector3d& p) const {
-        const Eigen::Vector3d d = p - plane.point;
-        return {d.dot(e1), d.dot(e2)};
-    }
-};
 
 // On-plane samples near the expected edge radius (the bracket seeds, per face) and, among them,
 // the coarse edge points: a grid normal leaving the plane normal (paper §4.3.2) or a neighbour
@@ -187,12 +176,7 @@ IntervalEstimate agreed_radius(const std::vector<Pair2d>& brackets, const Eigen:
 bool partial_arc_radius(const Context& ctx, const core::FeatureSpec& f, const EdgePlane& ep,
                         const FineEdge& fe, const BracketCircle& bc, FeatureResult& r,
                         double& radius, double& u_arc) {
-    const PlaneFit& pl = ep.plane;
-    const double z_axis =
-        pl.point.z() +
-        (pl.normal.x() * pl.point.x() + pl.normal.y() * pl.point.y()) / pl.normal.z();
-    const IntervalEstimate e =
-        agreed_radius(fe.brackets, ep.to2d(Eigen::Vector3d(0.0, 0.0, z_axis)));
+    const IntervalEstimate e = agreed_radius(fe.brackets, ep.axis2d());
     // The free fit's disagreement carries the pose's axis error: it enters u in full, and beyond
     // what the free fit's own noise explains the value is not trusted at all.
     const double disagreement = std::abs(e.value - bc.radius);
@@ -238,6 +222,8 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
     bool plane_inside = false;
     const auto ep = edge_plane(ctx, f, frames, R, plane_inside, r.reason);
     if (!ep) return;
+    if (ctx.recipe.forging && corner_diameter(ctx, f, frames, *ep, plane_inside ? 1.0 : -1.0, r))
+        return;
     const double R_e = ctx.ex.z(R), win = ctx.ex.tol(ctx.c.edge_window_mm, R);
     std::vector<Eigen::Vector2d> coarse;
     std::vector<std::vector<std::int64_t>> seeds;
@@ -296,6 +282,7 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
     if (sector_d.size() >= 2) r.sector_spread_mm = sample_std(sector_d);
     add_sector_term(r);
     r.ends.push_back({f.edge_at, "silhouette edge", f.faces, radius, 0.5 * r.u_mm, r.n_points});
+    r.centre_mm = centre;
 }
 
 }  // namespace hotgauge::measure::detail

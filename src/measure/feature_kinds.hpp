@@ -20,6 +20,11 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
 void measure_height(const Context& ctx, const core::FeatureSpec& f,
                     const std::vector<const FaceFrame*>& frames, FeatureResult& r);
 
+// Die shift: the distance between the axes of the part's halves, from the centres of the
+// measured diameters' circles above and below the parting plane (forged.cpp).
+void measure_die_shift(const Context& ctx, const std::vector<FeatureResult>& measured,
+                       FeatureResult& r);
+
 // Closes a feature's uncertainty budget: the sector spread's standard error joins the terms
 // (docs/measurement.md, "Uncertainty"), and u_mm becomes their quadrature sum.
 void add_sector_term(FeatureResult& r);

@@ -35,8 +35,9 @@ void measure_one(const detail::Context& ctx, const FrameRefs& frames, const Feat
     }
     if (f.kind == core::FeatureKind::kDiameter)
         detail::measure_diameter(ctx, f, used, r);
-    else
+    else if (f.kind == core::FeatureKind::kHeight)
         detail::measure_height(ctx, f, used, r);
+    // a die shift comes from the diameters' circles, once they are all measured (finish)
 }
 
 FeatureResult skeleton(const FeatureSpec& f) {
@@ -303,8 +304,12 @@ PartMeasurement PartMeasurer::finish() {
         const FeatureSpec& f = m.ctx.recipe.features[i];
         FeatureResult r = m.measured[i] ? std::move(*m.measured[i]) : skeleton(f);
         if (!m.measured[i]) measure_one(m.ctx, m.refs(f, false), f, r);  // names the missing face
-        judge(m.rec, m.ctx.recipe.material, out.growth, m.ctx.c.temperature_u_c, r);
         out.features.push_back(std::move(r));
+    }
+    for (auto& r : out.features) {
+        if (r.kind == core::FeatureKind::kDieShift && !r.face_missing)
+            detail::measure_die_shift(m.ctx, out.features, r);
+        judge(m.rec, m.ctx.recipe.material, out.growth, m.ctx.c.temperature_u_c, r);
     }
     out.verdict = overall(out.features);
     return out;

@@ -70,10 +70,26 @@ struct WallFit {
 };
 std::optional<WallFit> fit_wall(const Context& ctx, const std::vector<const FaceFrame*>& frames,
                                 const Segment& wall, const std::string& level, std::string& why) {
-    const double R_e = ctx.ex.z(wall.value), band = ctx.ex.tol(ctx.c.wall_band_mm, wall.value);
-    const double m = ctx.c.support_margin_mm;
-    const double z_lo = ctx.ex.z(wall.lo) + ctx.ex.tol(m, wall.lo),
-                 z_hi = ctx.ex.z(wall.hi) - ctx.ex.tol(m, wall.hi);
+    // A forged wall: clear of its fillets, and its draft widens the band of radii it spans.
+    double lean = 0, m = ctx.c.support_margin_mm;
+    if (ctx.recipe.forging) {
+        lean = std::tan(ctx.recipe.forging->draft_deg / kRadToDeg) * 0.5 * (wall.hi - wall.lo);
+        m += ctx.recipe.forging->fillet_mm;
+    }
+    const double R_e = ctx.ex.z(wall.value),
+                 band = ctx.ex.tol(ctx.c.wall_band_mm + lean, wall.value);
+    // The whole wall: the solid splits a cylinder at every level that crosses it.
+    double lo = wall.lo, hi = wall.hi;
+    for (bool grew = true; grew;) {
+        grew = false;
+        for (const auto& s : ctx.solid.boundary())
+            if (s.cylinder && s.value == wall.value && (s.hi == lo || s.lo == hi)) {
+                lo = std::min(lo, s.lo);
+                hi = std::max(hi, s.hi);
+                grew = true;
+            }
+    }
+    const double z_lo = ctx.ex.z(lo) + ctx.ex.tol(m, lo), z_hi = ctx.ex.z(hi) - ctx.ex.tol(m, hi);
     std::vector<double> radii;
     double sx = 0, sy = 0;
     WallFit w;
@@ -154,7 +170,7 @@ std::optional<LevelEnd> support_end(const Context& ctx, const std::string& level
             if (std::abs(s.r - R) <= w.thr && plate.distance(s.p.cast<double>()) > thr)
                 lowest = std::min(lowest, static_cast<double>(s.p.z()));
         });
-    if (lowest > z_end + kMaxRimGapMm) {
+    if (lowest > z_end + kMaxRimGapMm + ctx.recipe.fillet_at(level)) {
         why = "the wall ending at level '" + level + "' stops " + std::to_string(lowest - z_end) +
               " mm above where it would stand on the support plate: the part is not on the plate";
         return std::nullopt;
@@ -214,6 +230,39 @@ std::optional<LevelEnd> silhouette_end(const Context& ctx, const std::string& le
     return e;
 }
 
+// A forged part's end: a filleted edge's silhouette lies up to a fillet radius off its level, so
+// the level's own face is fitted, from the side faces that see it, else from the other faces of
+// the feature that do (the flange underside from the bottom scan); or the plate the part stands on.
+constexpr double kSideViewZ = 0.7;  // a side sensor looks across the axis: |view·z| below this
+std::optional<LevelEnd> forged_end(const Context& ctx, const std::string& level, double L,
+                                   const Segment& wall, const WallFit& w,
+                                   const std::vector<const FaceFrame*>& frames, std::string& why) {
+    std::vector<const FaceFrame*> sets[2];  // side faces, then the others
+    for (const auto* fr : frames) sets[std::abs(fr->view.z()) < kSideViewZ ? 0 : 1].push_back(fr);
+    std::string why_corner, why_support, unused;
+    for (const auto& set : sets) {
+        std::vector<const FaceFrame*> facing;
+        for (const auto* fr : set)
+            if (ctx.annulus(level, wall.value, {fr}, unused)) facing.push_back(fr);
+        if (facing.empty()) continue;
+        if (auto e = corner_end(ctx, level, wall, w, facing, why_corner)) {
+            for (const auto* fr : facing) e->est.faces.push_back(fr->scan->name);
+            return e;
+        }
+    }
+    if (!sets[0].empty())
+        if (auto e = support_end(ctx, level, L, wall, w, sets[0], why_support)) {
+            for (const auto* fr : sets[0]) e->est.faces.push_back(fr->scan->name);
+            return e;
+        }
+    why = "level '" + level +
+          "': its face is seen by none of the feature's faces, and a filleted " +
+          "edge's silhouette is no level";
+    for (const auto* extra : {&why_corner, &why_support})
+        if (!extra->empty()) why += "; " + *extra;
+    return std::nullopt;
+}
+
 // One end of a `method: edges` height, by the best estimator its faces allow.
 std::optional<LevelEnd> level_end(const Context& ctx, const std::string& level,
                                   const std::vector<const FaceFrame*>& frames, std::string& why) {
@@ -225,6 +274,7 @@ std::optional<LevelEnd> level_end(const Context& ctx, const std::string& level,
     }
     const auto w = fit_wall(ctx, frames, *wall, level, why);
     if (!w) return std::nullopt;
+    if (ctx.recipe.forging) return forged_end(ctx, level, L, *wall, *w, frames, why);
     std::string why_corner, why_support;
     auto e = corner_end(ctx, level, *wall, *w, frames, why_corner);
     if (!e) e = support_end(ctx, level, L, *wall, *w, frames, why_support);

@@ -123,6 +123,94 @@ double profile_scatter(const PlaneResult& pl) {
     return std::sqrt(std::max(0.0, (s_mean2 - s_noise2) / static_cast<double>(profiles)));
 }
 
+namespace {
+
+// Residuals against the radius about the axis, d = a + b·x + c·x² (x from the mean radius): a
+// cone (b) or a bend (c) across the face beyond 4σ and 4 µm over its width is no flat face, but
+// fillets meeting on a face narrower than they are (the bore step, 0.3 mm flat).
+bool curved_across(const PlaneResult& pl) {
+    constexpr double kMinSagMm = 0.004;
+    const auto n = static_cast<double>(pl.points.size());
+    double r_mean = 0;
+    for (const auto& p : pl.points) r_mean += p.head<2>().norm() / n;
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    double half = 0;
+    for (const auto& p : pl.points) {
+        const double x = p.head<2>().norm() - r_mean;
+        const Eigen::Vector3d row(1.0, x, x * x);
+        A += row * row.transpose();
+        b += row * pl.fit.distance(p);
+        half = std::max(half, std::abs(x));
+    }
+    const Eigen::Matrix3d cov = A.inverse() * pl.fit.rms_mm * pl.fit.rms_mm;
+    const Eigen::Vector3d k = A.ldlt().solve(b);
+    const bool cone =
+        std::abs(k[1]) > 4.0 * std::sqrt(cov(1, 1)) && std::abs(k[1]) * half > kMinSagMm;
+    const bool bend =
+        std::abs(k[2]) > 4.0 * std::sqrt(cov(2, 2)) && std::abs(k[2]) * half * half > kMinSagMm;
+    return cone || bend;
+}
+
+// The plane on the level's flat part only (forged parts): the inliers in radial bins of 0.25 mm
+// about the axis; while the innermost or outermost bin sits off the plane by more than its noise
+// allows (a fillet's tail running into the annulus), it is dropped and the plane fitted again.
+void keep_flat_part(PlaneResult& pl, bool narrow, const MeasureConfig& c, const std::string& what) {
+    constexpr double kBinMm = 0.25, kMinOffMm = 0.004;
+    constexpr std::size_t kMinBin = 20;
+    for (int round = 0; round < 40; ++round) {
+        double r_lo = 1e300, r_hi = -1e300;
+        for (const auto& p : pl.points) {
+            r_lo = std::min(r_lo, p.head<2>().norm());
+            r_hi = std::max(r_hi, p.head<2>().norm());
+        }
+        const auto nb = static_cast<std::size_t>((r_hi - r_lo) / kBinMm) + 1;
+        std::vector<double> sum(nb, 0.0);
+        std::vector<std::size_t> cnt(nb, 0);
+        auto bin = [&](const Eigen::Vector3d& p) {
+            return std::min(nb - 1, static_cast<std::size_t>((p.head<2>().norm() - r_lo) / kBinMm));
+        };
+        for (const auto& p : pl.points) {
+            sum[bin(p)] += pl.fit.distance(p);
+            cnt[bin(p)]++;
+        }
+        auto off = [&](std::size_t b) {
+            if (cnt[b] < kMinBin) return 0.0;  // too few to tell
+            const double mean = sum[b] / static_cast<double>(cnt[b]);
+            const double limit =
+                std::max(kMinOffMm, 4.0 * pl.fit.rms_mm / std::sqrt(static_cast<double>(cnt[b])));
+            return std::abs(mean) > limit ? std::abs(mean) : 0.0;
+        };
+        const double lo = off(0), hi = off(nb - 1);
+        if (lo == 0.0 && hi == 0.0) {
+            if (narrow && curved_across(pl))
+                pl.error = what + ": no flat part between its fillets (" +
+                           std::to_string(r_hi - r_lo) + " mm of the face seen, curved across)";
+            return;
+        }
+        const std::size_t drop = lo >= hi ? 0 : nb - 1;
+        PlaneResult kept;
+        for (std::size_t q = 0; q < pl.points.size(); ++q)
+            if (bin(pl.points[q]) != drop) {
+                kept.points.push_back(pl.points[q]);
+                kept.profile_keys.push_back(pl.profile_keys[q]);
+            }
+        auto fit = kept.points.size() >= static_cast<std::size_t>(c.min_plane_points)
+                       ? fit_plane_robust(kept.points, {c.on_surface_k_sigma, 0.0, 10})
+                       : core::Result<RobustPlaneFit>(core::make_error("too few points"));
+        if (!fit || nb < 3) {
+            pl.error = what + ": no flat part between its fillets (" + std::to_string(r_hi - r_lo) +
+                       " mm of the face seen, curved across)";
+            return;
+        }
+        pl.fit = fit->fit;
+        pl.points = std::move(kept.points);
+        pl.profile_keys = std::move(kept.profile_keys);
+    }
+}
+
+}  // namespace
+
 bool Context::faces_sensors(const Annulus& a, const std::vector<const FaceFrame*>& frames) {
     for (const auto* fr : frames)
         if (a.facing * fr->view.z() >= 0) return false;
@@ -152,6 +240,10 @@ PlaneResult Context::level_plane(const std::string& level, const Annulus& a,
     PlaneResult pl =
         fit_level_plane(frames, ex.z(z), ex.tol(c.plane_band_mm, z), ex.z(a.lo) + ex.tol(m, a.lo),
                         ex.z(a.hi) - ex.tol(m, a.hi), c, "plane at level '" + level + "'");
+    // A face narrower than its two largest fillets and a millimetre has no flat part by drawing.
+    const bool narrow = (a.hi - a.lo) < 2.0 * recipe.fillet_at(level) + 1.0;
+    if (pl.error.empty() && recipe.forging)
+        keep_flat_part(pl, narrow, c, "plane at level '" + level + "'");
     if (pl.error.empty()) {
         const double tilt = std::acos(std::min(1.0, std::abs(pl.fit.normal.z()))) * kRadToDeg;
         if (tilt > c.max_plane_tilt_deg)

@@ -351,7 +351,9 @@ std::string to_json(const PartResult& r) {
         json fj;
         fj["name"] = f.name;
         fj["slot"] = f.slot;
-        fj["kind"] = f.kind == core::FeatureKind::kDiameter ? "diameter" : "height";
+        fj["kind"] = f.kind == core::FeatureKind::kDiameter ? "diameter"
+                     : f.kind == core::FeatureKind::kHeight ? "height"
+                                                            : "die_shift";
         fj["faces"] = f.faces;
         fj["hot_mm"] = opt(f.hot_mm);
         fj["cold_mm"] = opt(f.cold_mm);

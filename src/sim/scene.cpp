@@ -23,6 +23,10 @@ void draw_dimensions(const core::Recipe& recipe, double sigma, std::mt19937_64& 
     for (const auto* list : {&recipe.outer, &recipe.inner})
         for (const auto& s : *list) truth.diameters_mm[s.name] = s.diameter_mm + dev(rng);
     for (const auto& f : recipe.features) {
+        if (f.kind == core::FeatureKind::kDieShift) {  // one axis: no die shift
+            truth.features.push_back({f.name, 0.0, 0.0});
+            continue;
+        }
         const double cold =
             f.kind == core::FeatureKind::kDiameter
                 ? truth.diameters_mm.at(f.section)

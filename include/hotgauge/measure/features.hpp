@@ -100,6 +100,8 @@ struct FeatureResult {
     double arc_deg = 0;  // diameters: angular coverage of the edge points
     std::string method;  // "edge circle", "planes", "plane and edge", "edges" (empty: none)
     std::vector<EdgeEstimate> ends;  // heights: from, to; diameters: the edge
+    // Diameters: the circle's own centre (hot, part frame), for the die shift.
+    std::optional<Eigen::Vector3d> centre_mm;
 };
 
 struct PartMeasurement {

@@ -1,0 +1,189 @@
+// The corner profile of a forged edge (docs/measurement.md, "Real forgings"): plane, fillet arc
+// and drafted wall in the half-plane about the circle's own centre, fitted by Levenberg–Marquardt
+// with analytic derivatives and 3σ rejection.
+#include "corner.hpp"
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+namespace hotgauge::measure::detail {
+namespace {
+
+using Vec5 = Eigen::Matrix<double, 5, 1>;  // centre x, centre y, radius, t, rho
+using Mat5 = Eigen::Matrix<double, 5, 5>;
+
+CornerModel from(const Vec5& x) { return {{x[0], x[1]}, x[2], x[3], x[4]}; }
+Vec5 to(const CornerModel& m) {
+    Vec5 x;
+    x << m.centre.x(), m.centre.y(), m.radius, m.t, m.rho;
+    return x;
+}
+
+// Residual and its gradient with respect to (cx, cy, radius, t, rho).
+double residual(const CornerModel& m, double side, const CornerPoint& p, Vec5* grad, int* part) {
+    const Eigen::Vector2d d = p.q - m.centre;
+    const double r = std::max(d.norm(), 1e-9);
+    const double s = side * (r - m.radius), h = p.h;
+    const double k = std::sqrt(1.0 + m.t * m.t);
+    // ds/d(cx, cy, radius); s does not depend on t or rho.
+    const Eigen::Vector2d ds_dc = -side * d / r;
+    const double ds_dr0 = -side;
+    // Fillet centre (s_c, h_c): rho from the plane and from the wall, inside the material.
+    const double s_c = -m.rho * k + m.t * m.rho, h_c = -m.rho;
+    const Eigen::Vector2d n2(1.0 / k, m.t / k);     // wall normal, out of the material
+    const Eigen::Vector2d down(m.t / k, -1.0 / k);  // along the wall, away from the plane
+    const Eigen::Vector2d c(s_c, h_c), T2 = c + m.rho * n2;
+    const Eigen::Vector2d ps(s, h);
+    int where = 1;
+    if (s <= s_c)
+        where = 0;
+    else if ((ps - T2).dot(down) >= 0.0)
+        where = 2;
+    if (part) *part = where;
+    Vec5 g = Vec5::Zero();
+    double e = 0;
+    if (where == 0) {
+        e = h;
+    } else if (where == 2) {
+        e = (s + m.t * h) / k;
+        g.head<2>() = ds_dc / k;
+        g[2] = ds_dr0 / k;
+        g[3] = h / k - (s + m.t * h) * m.t / (k * k * k);
+    } else {
+        const Eigen::Vector2d dv = ps - c;
+        const double D = std::max(dv.norm(), 1e-12);
+        const double es = dv.x() / D, eh = dv.y() / D;
+        e = D - m.rho;
+        g.head<2>() = es * ds_dc;
+        g[2] = es * ds_dr0;
+        g[3] = -es * m.rho * (1.0 - m.t / k);
+        g[4] = -es * (m.t - k) + eh - 1.0;
+    }
+    if (grad) *grad = g;
+    return e;
+}
+
+// One Levenberg–Marquardt solve on the inliers, with the draft's prior as one more residual.
+struct Solve {
+    Vec5 x;
+    Mat5 JtJ;
+    double rms = 0;
+};
+Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, double side, Vec5 x,
+            const CornerPrior& prior) {
+    const double t_mean = 0.5 * prior.t_max;
+    const double t_sigma = std::max(prior.t_max, 1e-3) / std::sqrt(12.0);
+    double lambda = 1e-3;
+    auto cost = [&](const Vec5& v, Mat5* JtJ, Vec5* Jte, double* sse, std::size_t* n) {
+        Mat5 A = Mat5::Zero();
+        Vec5 b = Vec5::Zero();
+        double s2 = 0;
+        std::size_t cnt = 0;
+        for (std::size_t q = 0; q < pts.size(); ++q) {
+            if (!use[q]) continue;
+            Vec5 g;
+            const double e = residual(from(v), side, pts[q], &g, nullptr);
+            A.selfadjointView<Eigen::Lower>().rankUpdate(g);
+            b += g * e;
+            s2 += e * e;
+            ++cnt;
+        }
+        A = A.selfadjointView<Eigen::Lower>();
+        if (sse) *sse = s2;
+        if (n) *n = cnt;
+        if (JtJ) *JtJ = A;
+        if (Jte) *Jte = b;
+        return s2;
+    };
+    Mat5 A;
+    Vec5 b;
+    double sse = 0;
+    std::size_t n = 0;
+    cost(x, &A, &b, &sse, &n);
+    const double sigma2 = std::max(sse / static_cast<double>(std::max<std::size_t>(n, 1)), 1e-6);
+    auto with_prior = [&](const Vec5& v, Mat5& M, Vec5& g, double& c) {
+        const double w = sigma2 / (t_sigma * t_sigma);
+        M(3, 3) += w;
+        g[3] += w * (v[3] - t_mean);
+        c += w * (v[3] - t_mean) * (v[3] - t_mean);
+    };
+    double c0 = sse;
+    with_prior(x, A, b, c0);
+    for (int it = 0; it < 50; ++it) {
+        Mat5 M = A;
+        M.diagonal() += lambda * (A.diagonal().array() + 1e-9).matrix();
+        const Vec5 step = -M.ldlt().solve(b);
+        Vec5 xn = x + step;
+        xn[3] = std::max(0.0, xn[3]);
+        xn[4] = std::clamp(xn[4], 0.0, 2.0 * prior.rho_max + 0.5);
+        Mat5 An;
+        Vec5 bn;
+        double c1 = 0;
+        cost(xn, &An, &bn, &c1, &n);
+        with_prior(xn, An, bn, c1);
+        if (c1 < c0) {
+            const bool done = c0 - c1 < 1e-10 * c0 || step.norm() < 1e-7;
+            x = xn, A = An, b = bn, c0 = c1;
+            lambda = std::max(lambda * 0.3, 1e-9);
+            if (done) break;
+        } else {
+            lambda *= 10.0;
+            if (lambda > 1e8) break;
+        }
+    }
+    cost(x, &A, nullptr, &sse, &n);  // the data's normal matrix and scatter at the solution
+    return {x, A, std::sqrt(sse / static_cast<double>(std::max<std::size_t>(n, 1)))};
+}
+
+}  // namespace
+
+double corner_residual(const CornerModel& m, double side, const CornerPoint& p, int* part) {
+    return residual(m, side, p, nullptr, part);
+}
+
+std::optional<CornerFit> fit_corner(const std::vector<CornerPoint>& pts, double side,
+                                    const CornerModel& start, const CornerPrior& prior) {
+    std::vector<char> use(pts.size(), 1);
+    Vec5 x = to(start);
+    Solve s;
+    for (int round = 0; round < 4; ++round) {
+        s = solve(pts, use, side, x, prior);
+        x = s.x;
+        const double thr = std::max(3.0 * s.rms, 0.02);
+        for (std::size_t q = 0; q < pts.size(); ++q)
+            use[q] = std::abs(residual(from(x), side, pts[q], nullptr, nullptr)) <= thr;
+    }
+    CornerFit out;
+    out.m = from(x);
+    out.rms = s.rms;
+    std::vector<double> sum(8, 0.0);
+    std::vector<int> cnt(8, 0);
+    for (std::size_t q = 0; q < pts.size(); ++q) {
+        if (!use[q]) continue;
+        int part = 0;
+        const double e = residual(out.m, side, pts[q], nullptr, &part);
+        (part == 0 ? out.n_plane : part == 1 ? out.n_arc : out.n_wall)++;
+        if (part == 0) continue;
+        const Eigen::Vector2d d = pts[q].q - out.m.centre;
+        const double turn = (std::atan2(d.y(), d.x()) + std::numbers::pi) / (2 * std::numbers::pi);
+        const int sec = std::min(7, static_cast<int>(turn * 8));
+        sum[sec] += side * e;  // samples beyond the profile: a larger circle (outer edge)
+        cnt[sec]++;
+    }
+    const std::int64_t n_profile = out.n_arc + out.n_wall;
+    for (int sec = 0; sec < 8; ++sec)
+        if (cnt[sec] >= std::max<std::int64_t>(10, n_profile / 32))
+            out.sector_radius.push_back(out.m.radius + sum[sec] / cnt[sec]);
+    const Eigen::LDLT<Mat5> ldlt(s.JtJ);
+    out.u_radius = std::numeric_limits<double>::infinity();  // the samples do not fix it
+    if (ldlt.info() == Eigen::Success && ldlt.rcond() > 1e-14) {
+        const Mat5 cov = ldlt.solve(Mat5::Identity()) * s.rms * s.rms;
+        out.u_radius = std::sqrt(std::max(0.0, cov(2, 2)));
+    }
+    return out;
+}
+
+}  // namespace hotgauge::measure::detail

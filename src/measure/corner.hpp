@@ -1,0 +1,84 @@
+#pragma once
+// The theoretical sharp corner of a forged edge (docs/measurement.md, "Real forgings"): the
+// level's plane, the wall's cone and the fillet between them, fitted as one profile about the
+// circle's own centre. Internal to the measure module.
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "hotgauge/core/part.hpp"
+#include "hotgauge/measure/features.hpp"
+#include "hotgauge/measure/fit.hpp"
+
+namespace hotgauge::measure::detail {
+
+struct Context;
+struct FaceFrame;
+
+// A level's plane with its normal towards the sensor (out of the material), its on-plane
+// threshold, the profiles' scatter off it, and a 2D frame in it for circle fits.
+struct EdgePlane {
+    PlaneFit plane;
+    double thr = 0;
+    double profile_scatter = 0;
+    Eigen::Vector3d e1, e2;
+    Eigen::Vector2d to2d(const Eigen::Vector3d& p) const {
+        const Eigen::Vector3d d = p - plane.point;
+        return {d.dot(e1), d.dot(e2)};
+    }
+    // Where the part axis crosses the plane, in its 2D frame.
+    Eigen::Vector2d axis2d() const;
+};
+
+// A sample in the level plane's frame: q its in-plane coordinates, h its height above the plane
+// (positive out of the material, towards the sensor that sees the plane).
+struct CornerPoint {
+    Eigen::Vector2d q;
+    double h;
+};
+
+// The corner's profile in the half-plane (s, h) about `centre`: s = side·(r − radius) is how far
+// a point lies beyond the corner circle (side +1 for an outer edge, −1 for a bore). The plane
+// h = 0 runs up to the fillet, an arc of radius `rho` tangent to both, the wall s = −t·h below
+// it (t = tan draft ≥ 0: a drafted wall always opens the corner). rho = 0 and t = 0 is the
+// drawing's idealisation.
+struct CornerModel {
+    Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+    double radius = 0;  // the theoretical sharp corner: where the wall meets the plane
+    double t = 0;
+    double rho = 0;
+};
+
+struct CornerPrior {
+    double t_max = 0;    // tan of the drawing's largest draft
+    double rho_max = 0;  // the drawing's largest fillet radius
+};
+
+struct CornerFit {
+    CornerModel m;
+    double u_radius = 0;  // standard uncertainty of `radius` (σ²·(JᵀJ)⁻¹, prior included)
+    double rms = 0;
+    std::int64_t n_wall = 0, n_arc = 0, n_plane = 0;  // inliers by the part of the profile
+    std::vector<double> sector_radius;                // the radius from each sector's points
+};
+
+// Least squares (Levenberg–Marquardt, 3σ rejection) of the corner profile to the samples. The
+// draft has a weak prior (the middle of the drawing's range, ± the range/√12), so a wall seen
+// too little to fix its own draft costs uncertainty rather than a value. `side`: +1 outer, −1
+// bore. u_radius is infinite when the samples do not fix the model.
+std::optional<CornerFit> fit_corner(const std::vector<CornerPoint>& pts, double side,
+                                    const CornerModel& start, const CornerPrior& prior);
+
+// The distance of a sample from the profile, and where it lies (0 plane, 1 fillet, 2 wall).
+double corner_residual(const CornerModel& m, double side, const CornerPoint& p, int* part);
+
+// Diameter `f` at its theoretical sharp corner when its edge is filleted or its wall seen: the
+// corner profile fitted on the samples of its plane, fillet and wall (recipes with a forging
+// drawing). Returns false, leaving `r` as it was, when nothing beyond the plane is seen (a sharp
+// edge over a wall out of view): the edge brackets measure that corner. `side`: +1 outer edge.
+bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
+                     const std::vector<const FaceFrame*>& frames, const EdgePlane& ep, double side,
+                     FeatureResult& r);
+
+}  // namespace hotgauge::measure::detail

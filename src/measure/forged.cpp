@@ -1,0 +1,203 @@
+// Diameters of forged edges at the theoretical sharp corner (docs/measurement.md, "Real
+// forgings"): the samples of the level's plane, the fillet and the drafted wall near the edge,
+// and the corner profile fitted to them about the circle's own centre (corner.cpp).
+#include <algorithm>
+#include <cmath>
+
+#include "corner.hpp"
+#include "edges.hpp"
+#include "feature_kinds.hpp"
+#include "frame.hpp"
+#include "surfaces.hpp"
+
+namespace hotgauge::measure::detail {
+
+Eigen::Vector2d EdgePlane::axis2d() const {
+    const PlaneFit& pl = plane;
+    const double z_axis =
+        pl.point.z() +
+        (pl.normal.x() * pl.point.x() + pl.normal.y() * pl.point.y()) / pl.normal.z();
+    return to2d(Eigen::Vector3d(0.0, 0.0, z_axis));
+}
+
+namespace {
+
+// Fewer samples than this beyond the plane (fillet and wall): the edge is sharp, or its wall out
+// of view, and the edge brackets measure it.
+constexpr std::int64_t kMinProfileSamples = 200;
+// A fitted fillet smaller than this is a sharp edge: the brackets pin it better than the profile.
+constexpr double kSharpRhoMm = 0.1;
+// The profile's samples scatter by the range noise (0.05 mm); far more is not this corner.
+constexpr double kMaxRmsMm = 0.2;
+
+// How far down the wall (hot, mm from the level) is plain cone: to the section's other level's
+// fillet, or to the parting plane, where the drafts change direction and the die shift steps.
+double wall_depth(const Context& ctx, const core::FeatureSpec& f) {
+    const core::Section* s = ctx.recipe.section(f.section);
+    const std::string& other = f.edge_at == s->from_level ? s->to_level : s->from_level;
+    const double z_e = ctx.level_z(f.edge_at);
+    double z_o = ctx.level_z(other), stop = ctx.recipe.fillet_at(other) + 0.5;
+    const double zp = ctx.recipe.forging->parting_z_mm;
+    if ((zp - z_e) * (zp - z_o) < 0.0) {
+        z_o = zp;
+        stop = 1.0;
+    }
+    return std::max(0.0, std::abs(z_o - z_e) - stop) * ctx.ex.g;
+}
+
+// The samples near the corner circle (c, R) in the plane's frame: h in [−depth, 0.5], s (beyond
+// the circle) in [−s_in, s_out].
+std::vector<CornerPoint> corner_points(const std::vector<const FaceFrame*>& frames,
+                                       const EdgePlane& ep, double side, const Eigen::Vector2d& c,
+                                       double R, double s_in, double s_out, double depth) {
+    constexpr double kAbove = 0.5;
+    const double nz = std::abs(ep.plane.normal.z()), z0 = ep.plane.point.z();
+    const double up = ep.plane.normal.z() > 0 ? 1.0 : -1.0;
+    const double za = z0 - up * depth * nz, zb = z0 + up * kAbove;
+    std::vector<CornerPoint> out;
+    for (const auto* fr : frames)
+        fr->for_z(std::min(za, zb) - 1.0, std::max(za, zb) + 1.0, [&](const FaceFrame::Near& n) {
+            const Eigen::Vector3d p = n.p.cast<double>();
+            const double h = ep.plane.distance(p);
+            if (h < -depth || h > kAbove) return;
+            const Eigen::Vector2d q = ep.to2d(p);
+            const double s = side * ((q - c).norm() - R);
+            if (s >= -s_in && s <= s_out) out.push_back({q, h});
+        });
+    return out;
+}
+
+// A fillet is seen when its samples, per mm of its width across the plane, are at least a third
+// as dense as the plane's: a few hundred samples strewn over a sharp edge's shadow are not one.
+bool fillet_seen(const CornerFit& fit, double s_in) {
+    constexpr double kMinDensityRatio = 0.3;
+    const double arc_width = std::max(fit.m.rho, 0.05);
+    const double plane_width = std::max(s_in - arc_width, 0.5);
+    return static_cast<double>(fit.n_arc + fit.n_wall) / arc_width >=
+           kMinDensityRatio * static_cast<double>(fit.n_plane) / plane_width;
+}
+
+// Why a fitted profile is not this corner's (a wrong pose, another surface in the window, a
+// shadow), or empty: far more scatter than the range noise, a circle its samples do not fix, a
+// fillet or draft the drawing does not allow, a circle off where the part can have it.
+std::string refusal(const CornerFit& fit, const CornerPrior& prior, double R_e, double slack,
+                    const Eigen::Vector2d& axis) {
+    const CornerModel& m = fit.m;
+    if (fit.rms > kMaxRmsMm)
+        return "its samples lie " + std::to_string(fit.rms) +
+               " mm RMS off the corner's profile: wrong pose or wrong part";
+    if (!std::isfinite(fit.u_radius)) return "its samples do not fix the corner's circle";
+    const double t_limit = std::tan(std::atan(prior.t_max) + 1.0 / kRadToDeg);
+    if (m.rho > 1.2 * prior.rho_max + 0.2 || m.t > t_limit)
+        return "fitted fillet R " + std::to_string(m.rho) + " mm, draft " +
+               std::to_string(std::atan(m.t) * kRadToDeg) +
+               "°, outside the drawing's (R <= " + std::to_string(prior.rho_max) + " mm)";
+    if (std::abs(m.radius - R_e) > 2.0 * slack || (m.centre - axis).norm() > 2.0 * slack)
+        return "fitted at radius " + std::to_string(m.radius) + " mm, " +
+               std::to_string((m.centre - axis).norm()) +
+               " mm off the part axis: wrong pose or wrong part";
+    return {};
+}
+
+}  // namespace
+
+bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
+                     const std::vector<const FaceFrame*>& frames, const EdgePlane& ep, double side,
+                     FeatureResult& r) {
+    const core::ForgingSpec& forging = *ctx.recipe.forging;
+    const CornerPrior prior{std::tan(ctx.recipe.draft_of(f.section) / kRadToDeg),
+                            ctx.recipe.fillet_at(f.edge_at)};
+    const double depth = wall_depth(ctx, f);
+    const double R_e = ctx.ex.z(0.5 * ctx.recipe.section(f.section)->diameter_mm);
+    // Where the corner may be: the window of a sorting gauge and the die shift about the axis.
+    const double slack = ctx.ex.tol(ctx.c.edge_window_mm, R_e) * 0.5 + forging.die_shift_mm;
+    CornerModel m{ep.axis2d(), R_e, 0.5 * prior.t_max, 0.5 * prior.rho_max};
+    std::optional<CornerFit> fit;
+    // Wide around the expected circle, then tight around the fitted one.
+    for (int pass = 0; pass < 2; ++pass) {
+        const double s_in = pass == 0 ? prior.rho_max + 1.0 + slack : m.rho + 1.5;
+        const double s_out = (pass == 0 ? slack + 0.5 : 0.5) + prior.t_max * depth;
+        const auto pts = corner_points(frames, ep, side, m.centre, m.radius, s_in, s_out, depth);
+        fit = fit_corner(pts, side, m, prior);
+        if (fit->n_arc + fit->n_wall < kMinProfileSamples || !fillet_seen(*fit, s_in)) {
+            r.reason.clear();
+            return false;
+        }
+        m = fit->m;
+    }
+    if (fit->m.rho < kSharpRhoMm) return false;
+    if (const std::string why = refusal(*fit, prior, R_e, slack, ep.axis2d()); !why.empty()) {
+        r.reason = "corner of '" + f.section + "' at '" + f.edge_at + "': " + why;
+        return true;
+    }
+    r.hot_mm = 2.0 * m.radius;
+    r.u_budget = {{"fit", 2.0 * fit->u_radius}, {"compensation", ep.profile_scatter}};
+    r.fit_rms_mm = fit->rms;
+    r.n_points = fit->n_arc + fit->n_wall;
+    r.method = "corner profile";
+    r.arc_deg = 45.0 * static_cast<double>(fit->sector_radius.size());
+    r.n_sectors = static_cast<int>(fit->sector_radius.size());
+    if (fit->sector_radius.size() >= 2) r.sector_spread_mm = 2.0 * sample_std(fit->sector_radius);
+    add_sector_term(r);
+    r.ends.push_back({f.edge_at, "corner profile", f.faces, m.radius, 0.5 * r.u_mm, r.n_points});
+    r.centre_mm = ep.plane.point + m.centre.x() * ep.e1 + m.centre.y() * ep.e2;
+    return true;
+}
+
+}  // namespace hotgauge::measure::detail
+
+namespace hotgauge::measure::detail {
+
+// The two halves' axes share one direction (a die shift is a translation): x = a_half + b·z,
+// y = c_half + d·z by weighted least squares over the measured circles' centres; the die shift
+// is the distance between the halves' axes, the same at every z.
+void measure_die_shift(const Context& ctx, const std::vector<FeatureResult>& measured,
+                       FeatureResult& r) {
+    const double zp = ctx.ex.z(ctx.recipe.forging->parting_z_mm);
+    Eigen::Matrix3d A[2];  // per coordinate: unknowns (upper offset, lower offset, slope)
+    Eigen::Vector3d b[2];
+    for (int k = 0; k < 2; ++k) A[k].setZero(), b[k].setZero();
+    int n[2] = {0, 0};
+    double z_lo[2] = {1e300, 1e300}, z_hi[2] = {-1e300, -1e300};
+    for (const auto& f : measured) {
+        if (f.kind != core::FeatureKind::kDiameter || !f.hot_mm || !f.centre_mm) continue;
+        const Eigen::Vector3d& c = *f.centre_mm;
+        const int half = c.z() > zp ? 0 : 1;
+        const double w = 1.0 / std::max(f.u_mm * f.u_mm, 1e-8);
+        Eigen::Vector3d row = Eigen::Vector3d::Zero();
+        row[half] = 1.0;
+        row[2] = c.z();
+        for (int k = 0; k < 2; ++k) {
+            A[k] += w * row * row.transpose();
+            b[k] += w * row * c[k];
+        }
+        n[half]++;
+        z_lo[half] = std::min(z_lo[half], c.z());
+        z_hi[half] = std::max(z_hi[half], c.z());
+    }
+    if (n[0] < 1 || n[1] < 1 || std::max(z_hi[0] - z_lo[0], z_hi[1] - z_lo[1]) < 5.0) {
+        r.reason = "die shift: needs measured circles on both halves (upper " +
+                   std::to_string(n[0]) + ", lower " + std::to_string(n[1]) +
+                   ") and 5 mm of axis within one half";
+        return;
+    }
+    Eigen::Vector2d shift, u2;
+    for (int k = 0; k < 2; ++k) {
+        const Eigen::Vector3d x = A[k].ldlt().solve(b[k]);
+        const Eigen::Matrix3d cov = A[k].inverse();
+        shift[k] = x[0] - x[1];
+        u2[k] = cov(0, 0) + cov(1, 1) - 2.0 * cov(0, 1);
+    }
+    r.hot_mm = shift.norm();
+    const Eigen::Vector2d dir =
+        shift.norm() > 1e-9 ? Eigen::Vector2d(shift / shift.norm()) : Eigen::Vector2d(1.0, 0.0);
+    r.u_budget = {{"centres", std::sqrt(dir.x() * dir.x() * u2.x() + dir.y() * dir.y() * u2.y())}};
+    r.n_points = 0;
+    for (const auto& f : measured)
+        if (f.kind == core::FeatureKind::kDiameter && f.hot_mm && f.centre_mm)
+            r.n_points += f.n_points;
+    r.method = "circle centres";
+    add_sector_term(r);
+}
+
+}  // namespace hotgauge::measure::detail

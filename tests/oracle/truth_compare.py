@@ -1,0 +1,49 @@
+#!/usr/bin/python3
+"""Errors of `hotgauge measure --json` against a recording's truth.json (measured − true, hot).
+
+The truth names a feature by face and name ("side1", "Height 3"); the recipe names it
+"Height 3 side1". Prints one line per feature; with --limit, exits 1 when a measured feature is
+off by more than the limit or a feature the truth has is not measured (Height 1 may be)."""
+import argparse
+import json
+import subprocess
+import sys
+
+
+def key(face, name):
+    return name if face in ("top", "bottom", "all") else f"{name} {face}"
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("hotgauge")
+    ap.add_argument("recording_dir", help="folder with part/ and truth.json")
+    ap.add_argument("--limit", type=float)
+    ap.add_argument("--part-pose", action="store_true", help="measure at the true pose")
+    ap.add_argument("extra", nargs="*")
+    a = ap.parse_args()
+    truth = json.load(open(f"{a.recording_dir}/truth.json"))
+    cmd = [a.hotgauge, "measure", f"{a.recording_dir}/part", "--json", *a.extra]
+    out = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
+    got = {f["name"]: f for f in out["features"]}
+    bad = 0
+    print(f"{a.recording_dir}: verdict {out['verdict']}")
+    for t in truth["features"]:
+        k = key(t["face"], t["name"])
+        f = got.get(k)
+        if f is None or f["hot_mm"] is None:
+            why = "absent" if f is None else f["reason"]
+            print(f"  {k:18s} not measured: {why}")
+            bad += not k.startswith("Height 1")
+            continue
+        err = f["hot_mm"] - t["true_hot"]
+        flag = a.limit is not None and abs(err) > a.limit
+        bad += flag
+        print(f"  {k:18s} {err:+.4f} u {f['u_mm']:.4f} {f['verdict']:12s} {f['method']}"
+              f"{'  <-- off' if flag else ''}")
+    if a.limit is not None and bad:
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
