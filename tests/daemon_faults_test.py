@@ -114,8 +114,8 @@ def main():
             return p
 
         def expect_ok(p):
-            """The part is OK with all 13 features; if not, the results file's reasons say why."""
-            if p["verdict"] != "OK" or p["n_features"] != 13:
+            """The part is OK with all 14 features; if not, the results file's reasons say why."""
+            if p["verdict"] != "OK" or p["n_features"] != 14:
                 last = jsonl(line)[-1]
                 raise AssertionError(f"expected OK, got {p['verdict']}: PLC {p}; results file "
                                      f"{last['part'].get('degraded_reasons')}")
@@ -305,7 +305,7 @@ def main():
         plc = kill_and_restart("killed-busy")
         p = vl.run_part(plc, conveyor, n, 500 + n)
         print(f"   part {n} again: verdict {p['verdict']}, cycle {p['cycle_s']:.1f} s")
-        assert p["state"] == vl.DONE and p["verdict"] == "OK" and p["n_features"] == 13, p
+        assert p["state"] == vl.DONE and p["verdict"] == "OK" and p["n_features"] == 14, p
         files_intact()
         assert kept[-1]["part"]["part_id"] == str(500 + n), "the retried part has its row"
 

@@ -17,11 +17,11 @@ cleanup() {
 trap cleanup EXIT
 fail() { echo "FAIL: $*"; [ -f "$tmp/serve.log" ] && tail -20 "$tmp/serve.log"; exit 1; }
 
-# Which feature is in which slot: hub-a's 13, each with its first input register; a recipe that
+# Which feature is in which slot: hub-a's 14, each with its first input register; a recipe that
 # is not there is an error naming it.
 recipe="$(dirname "$0")/../config/parts/hub-a.yaml"
 slots=$("$bin" plc map --recipe "$recipe") || fail "plc map --recipe failed"
-[ "$(grep -c '^| [0-9]' <<< "$slots")" = 13 ] || fail "plc map --recipe: not 13 slots: $slots"
+[ "$(grep -c '^| [0-9]' <<< "$slots")" = 14 ] || fail "plc map --recipe: not 14 slots: $slots"
 grep -q '^| 3 | Diameter 3 | 28–29 / 30–31 / 32 / 33 | 30029 |' <<< "$slots" \
   || fail "plc map --recipe: slot 3 is not Diameter 3 at input 28: $slots"
 if "$bin" plc map --recipe "$tmp/none.yaml" > "$tmp/out" 2>&1; then fail "no recipe, exit 0"; fi
@@ -101,7 +101,7 @@ expect "still busy" "$(reg 1)" 2
 wait_state 3
 expect "sequence" "$(reg 5)" 1
 expect "overall verdict" "$(reg 11)" 1
-expect "feature count" "$(reg 12)" 13
+expect "feature count" "$(reg 12)" 14
 expect "temperature" "$(reg 13)" 10500
 n=0
 while read -r slot um mm; do
@@ -114,7 +114,7 @@ while read -r slot um mm; do
   expect "slot $slot mirror" "$(reg $((100 + base)) 4:int -B)" "$um"
   n=$((n + 1))
 done < <(expected 1234)
-expect "features checked" "$n" 13
+expect "features checked" "$n" 14
 # Slot 1 (138.38 mm) has a non-zero high word: read with the other word order it is wrong.
 [ "$(reg 16 3:int)" != "$(reg 16 3:int -B)" ] || fail "word order made no difference"
 

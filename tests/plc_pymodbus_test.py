@@ -184,7 +184,7 @@ def check_order(tmp, recipe, name, wordorder):
         assert regs[8] == 1 and regs[9] == 0, "recipe slot / face echo"
         assert regs[10] == (part + 1) & 0xFFFF, "PLC heartbeat echo of the last write"
         assert regs[11] == 1, f"overall verdict {regs[11]}"
-        assert regs[12] == 13, f"feature count {regs[12]}"
+        assert regs[12] == 14, f"feature count {regs[12]}"
         assert regs[13] == 10500, f"temperature {regs[13]}"
         want = expected(recipe, part)
         got = features_of(regs, plc)
@@ -227,7 +227,7 @@ def check_order(tmp, recipe, name, wordorder):
         nominal4 = round(recipe["features"][3]["nominal_mm"] * 1000)
         assert got[4][0] == nominal4 + 1000 and got[4][2] == 4, f"degraded, not NOK: {got[4]}"
         assert regs[39] >> 8 == 2 | 4 and regs[114] == 6, "reasons: degraded, outside tolerance"
-        assert all(g[2] == 1 for s, g in got.items() if s <= 13 and s != 4)
+        assert all(g[2] == 1 for s, g in got.items() if s <= 14 and s != 4)
         plc.write(0, [ACK])
 
         # FAULT: only a reset leaves it.

@@ -39,7 +39,7 @@ TEST(Recipe, HubALoads) {
     auto r = read_recipe(HOTGAUGE_SOURCE_DIR "/config/parts/hub-a.yaml");
     ASSERT_TRUE(r) << r.error().message;
     EXPECT_EQ(r->name, "hub-a");
-    EXPECT_EQ(r->features.size(), 13u);
+    EXPECT_EQ(r->features.size(), 14u);  // the paper's 13 and the die shift
     EXPECT_EQ(r->levels_mm.size(), 7u);
     EXPECT_EQ(r->outer.size(), 4u);
     EXPECT_EQ(r->inner.size(), 3u);
@@ -49,6 +49,42 @@ TEST(Recipe, HubALoads) {
     EXPECT_DOUBLE_EQ(d3->diameter_mm, 69.5);
     EXPECT_FALSE(r->is_inner(*d3));
     EXPECT_TRUE(r->is_inner(*r->section("through bore")));
+    ASSERT_TRUE(r->forging);
+    EXPECT_DOUBLE_EQ(r->forging->parting_z_mm, 55.15);
+    EXPECT_DOUBLE_EQ(r->draft_of("boss"), 3.0);
+    EXPECT_DOUBLE_EQ(r->fillet_at("bore_step"), 2.5);
+    EXPECT_DOUBLE_EQ(r->forging->die_shift_mm, 0.5);
+    EXPECT_EQ(r->features.back().kind, hotgauge::core::FeatureKind::kDieShift);
+}
+
+TEST(Recipe, ForgingDrawing) {
+    const std::string at = "  die_shift_mm: 0.5";
+    auto with = [&](const std::string& extra) { return error_after(at, at + "\n" + extra); };
+    EXPECT_NE(with("  section_draft_deg: {bos: 1}")
+                  .find("forging.section_draft_deg.bos: unknown "
+                        "section 'bos'"),
+              std::string::npos);
+    EXPECT_NE(with("  level_fillet_mm: {bore_step: -1}").find("expected 0 .. 20"),
+              std::string::npos);
+    EXPECT_NE(with("  shift: 1").find("unknown key 'shift'"), std::string::npos);
+    EXPECT_NE(error_after("parting_z_mm: 55.15", "parting_z_mm: 80").find("must lie inside"),
+              std::string::npos);
+    EXPECT_NE(error_after("draft_deg: 3 ", "draft_deg: 12 ").find("forging.draft_deg"),
+              std::string::npos);
+    EXPECT_NE(error_after("tolerance_mm: [0.0, 0.5]", "tolerance_mm: [-0.1, 0.5]")
+                  .find("lower tolerance is 0"),
+              std::string::npos);
+    // A die shift needs the parting plane: without the drawing it is refused where it stands.
+    std::string text = hub_a_text();
+    const auto from = text.find("forging:"), to = text.find("features:");
+    text.erase(from, to - from);
+    const fs::path p = fs::temp_directory_path() / "hotgauge_recipe_noforging.yaml";
+    std::ofstream(p) << text;
+    auto r = read_recipe(p);
+    fs::remove(p);
+    ASSERT_FALSE(r);
+    EXPECT_NE(r.error().message.find("needs the recipe's 'forging' drawing"), std::string::npos)
+        << r.error().message;
 }
 
 TEST(Recipe, UnknownKeyNamesFileLineAndKey) {

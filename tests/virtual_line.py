@@ -634,11 +634,11 @@ def check_masters(results_dir, parts, lines):
     assert failed == ["Diameter 3"], failed
     checks = [j["verification"] for j in lines if "verification" in j]
     assert [c["passed"] for c in checks] == [True, False], checks
-    assert len(checks[0]["features"]) == 13, checks[0]
+    assert len(checks[0]["features"]) == 14, checks[0]
     assert [f["name"] for f in checks[1]["features"] if not f["passed"]] == ["Diameter 3"], checks[1]
     worst = max(abs(f["deviation_mm"]) for f in checks[0]["features"])
     d3 = next(f["deviation_mm"] for f in checks[1]["features"] if f["name"] == "Diameter 3")
-    print(f"master checks: slot 9 passed (13 features, worst deviation {worst:.4f} mm), slot 10 "
+    print(f"master checks: slot 9 passed (14 features, worst deviation {worst:.4f} mm), slot 10 "
           f"failed on Diameter 3 alone (deviation {d3:+.4f} mm); PLC verdicts OK, NOK; "
           f"{len(rows)} rows in {', '.join(names)}")
     return worst

@@ -155,8 +155,10 @@ void QualityFeed::stored(const std::string& jsonl_line, std::int64_t time_ns) {
         return;
     }
     unwritten_ = true;
-    const std::chrono::duration<double> since = std::chrono::steady_clock::now() - written_;
-    if (since.count() >= config_.lot_report_every_s) write_report();
+    if (!written_ ||
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - *written_).count() >=
+            config_.lot_report_every_s)
+        write_report();
 }
 
 void QualityFeed::write_report() {

@@ -232,7 +232,7 @@ Recipe read_recipe(const std::string& path) {
         ft.faces = f["faces"].as<std::vector<std::string>>();
         if (ft.kind == "diameter") {
             ft.section = f["section"].as<std::string>();
-        } else {
+        } else if (ft.kind == "height") {
             ft.from = f["from"].as<std::string>();
             ft.to = f["to"].as<std::string>();
         }
@@ -743,8 +743,10 @@ int run(const Options& o) {
     js << "},\n  \"features\": [\n";
     for (std::size_t i = 0; i < rc.features.size(); ++i) {
         const Feature& ft = rc.features[i];
+        // The render is one solid of revolution: one axis, no die shift.
         const double cold = ft.kind == "diameter" ? rc.section(ft.section).diameter
-                                                  : rc.level(ft.to) - rc.level(ft.from);
+                            : ft.kind == "height" ? rc.level(ft.to) - rc.level(ft.from)
+                                                  : 0.0;
         if (std::abs(cold - ft.nominal) > 1e-9)
             std::cerr << "warning: " << ft.name << ": geometry gives " << cold << ", nominal_mm "
                       << ft.nominal << "\n";
@@ -756,7 +758,7 @@ int run(const Options& o) {
            << ", \"true_cold\": " << num(cold) << ", \"true_hot\": " << num(scale * cold);
         if (ft.kind == "diameter")
             js << ", \"section\": " << json_string(ft.section);
-        else
+        else if (ft.kind == "height")
             js << ", \"from\": " << json_string(ft.from) << ", \"to\": " << json_string(ft.to);
         js << "}" << (i + 1 < rc.features.size() ? "," : "") << "\n";
     }

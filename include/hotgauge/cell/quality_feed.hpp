@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -56,7 +57,9 @@ class QualityFeed {
     std::string today_;  // local date of the parts below
     std::vector<results::PartRecord> parts_;
     bool unwritten_ = false;  // parts came since the page was last written
-    std::chrono::steady_clock::time_point written_{};
+    // When the page was last written; unset: never (the steady clock starts at boot, so a
+    // machine up for less than lot_report_every_s would otherwise wait for its first page).
+    std::optional<std::chrono::steady_clock::time_point> written_;
 };
 
 }  // namespace hotgauge::cell
