@@ -2,9 +2,11 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <ctime>
 #include <filesystem>
+#include <map>
 #include <random>
 
 #include "commands.hpp"
@@ -38,6 +40,7 @@ struct SimulateArgs {
     std::optional<double> noise_mm, spike_fraction, dropout_fraction, max_tilt_deg;
     std::optional<double> yaw_deg;
     std::vector<double> offset_mm;
+    std::vector<std::string> bad;  // "NAME=DELTA" (mm)
     // --serve: the virtual cell instead of a recording.
     bool serve = false;
     vcell::VirtualCellConfig vc;
@@ -51,6 +54,28 @@ struct SimulateArgs {
     std::string calibration;           // replay: the receiving daemon's calibration
     double scan_s = 1.3;               // replay: the daemon's camera.scan_s
 };
+
+// --bad "NAME=DELTA": a feature's name and the mm its true value moves (e.g. "Diameter 3=+0.7").
+core::Result<std::map<std::string, double>> parse_bad(const std::vector<std::string>& bad) {
+    std::map<std::string, double> out;
+    for (const auto& b : bad) {
+        const auto eq = b.rfind('=');
+        std::size_t used = 0;
+        double delta = 0.0;
+        try {
+            if (eq != std::string::npos) delta = std::stod(b.substr(eq + 1), &used);
+        } catch (const std::exception&) {
+            used = 0;
+        }
+        std::string name = eq == std::string::npos ? "" : b.substr(0, eq);
+        while (!name.empty() && name.back() == ' ') name.pop_back();
+        if (name.empty() || used == 0 || used != b.size() - eq - 1 || !std::isfinite(delta))
+            return core::make_error("simulate --bad '" + b +
+                                    "': expected NAME=DELTA in mm, e.g. \"Diameter 3=+0.7\"");
+        out[name] = delta;
+    }
+    return out;
+}
 
 // --replay REC: the recording and the daemon's calibration, or the first problem (named file).
 core::Result<vcell::ReplayConfig> load_replay(const SimulateArgs& a) {
@@ -221,6 +246,12 @@ int run(const SimulateArgs& a) {
     if (a.dropout_fraction) c.sensor.dropout_fraction = *a.dropout_fraction;
     if (a.max_tilt_deg) c.placement.max_tilt_deg = *a.max_tilt_deg;
     sim::SimOptions opt = a.opt;
+    auto bad = parse_bad(a.bad);
+    if (!bad) {
+        spdlog::error("{}", bad.error().message);
+        return 2;
+    }
+    opt.bad_mm = std::move(*bad);
     if (!a.in_force.empty()) {
         auto in_force = calib::read_calibration(a.in_force);
         if (!in_force) {
@@ -314,6 +345,12 @@ Command add_simulate(CLI::App& app) {
     s->add_option("--dimension-sigma", a->opt.dimension_sigma_mm,
                   "as-forged deviation of each dimension from nominal, mm")
         ->capture_default_str();
+    s->add_flag("--forged", a->opt.forged,
+                "the part as it leaves the press: draft, fillets and die shift drawn within the "
+                "recipe's forging drawing (docs/simulator.md \"As-forged parts\")");
+    s->add_option("--bad", a->bad,
+                  "a bad feature: \"NAME=DELTA\" moves its true value by DELTA mm (a height: "
+                  "its upper level); repeatable");
     s->add_option("--yaw", a->yaw_deg, "part yaw on the support, degrees (default: random)");
     s->add_option("--offset", a->offset_mm, "part x y offset on the support, mm")->expected(2);
     s->add_option("--max-tilt", a->max_tilt_deg, "random tilt up to this, degrees");

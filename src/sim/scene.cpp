@@ -22,16 +22,129 @@ void draw_dimensions(const core::Recipe& recipe, double sigma, std::mt19937_64& 
     }
     for (const auto* list : {&recipe.outer, &recipe.inner})
         for (const auto& s : *list) truth.diameters_mm[s.name] = s.diameter_mm + dev(rng);
-    for (const auto& f : recipe.features) {
-        if (f.kind == core::FeatureKind::kDieShift) {  // one axis: no die shift
-            truth.features.push_back({f.name, 0.0, 0.0});
-            continue;
+}
+
+// The die shift's feature name: the recipe's, or "Die shift" (hub-a.md "As forged").
+std::string die_shift_name(const core::Recipe& recipe) {
+    for (const auto& f : recipe.features)
+        if (f.kind == core::FeatureKind::kDieShift) return f.name;
+    return "Die shift";
+}
+
+// Bad features: a diameter's section, a height's upper level moved by the delta (the die shift
+// is moved where it is drawn, draw_forged).
+core::Result<void> apply_bad(const core::Recipe& recipe, const SimOptions& opt, SimTruth& truth) {
+    for (const auto& [name, delta] : opt.bad_mm) {
+        const auto f = std::find_if(recipe.features.begin(), recipe.features.end(),
+                                    [&](const core::FeatureSpec& s) { return s.name == name; });
+        if (name == die_shift_name(recipe)) {
+            if (!opt.forged)
+                return core::make_error("simulate --bad '" + name +
+                                        "': a die shift needs an as-forged part (--forged)");
+        } else if (f == recipe.features.end()) {
+            std::string known;
+            for (const auto& s : recipe.features) known += (known.empty() ? "" : ", ") + s.name;
+            return core::make_error("simulate --bad: no feature '" + name + "' in recipe '" +
+                                    recipe.name + "' (" + known + ")");
+        } else if (f->kind == core::FeatureKind::kDiameter) {
+            truth.diameters_mm.at(f->section) += delta;
+        } else {
+            const bool to_is_upper =
+                recipe.level(f->to_level).value_or(0) >= recipe.level(f->from_level).value_or(0);
+            truth.levels_mm.at(to_is_upper ? f->to_level : f->from_level) += delta;
         }
-        const double cold =
-            f.kind == core::FeatureKind::kDiameter
-                ? truth.diameters_mm.at(f.section)
-                : std::abs(truth.levels_mm.at(f.to_level) - truth.levels_mm.at(f.from_level));
+    }
+    truth.bad_mm = opt.bad_mm;
+    return {};
+}
+
+// Every feature's true value of the part as drawn (sharp, vertical, one axis: no die shift).
+void true_features(const core::Recipe& recipe, SimTruth& truth) {
+    for (const auto& f : recipe.features) {
+        double cold = 0.0;
+        if (f.kind == core::FeatureKind::kDiameter)
+            cold = truth.diameters_mm.at(f.section);
+        else if (f.kind == core::FeatureKind::kHeight)
+            cold = std::abs(truth.levels_mm.at(f.to_level) - truth.levels_mm.at(f.from_level));
         truth.features.push_back({f.name, cold * truth.growth, cold});
+    }
+}
+
+// Uniform in [1, max] (a draft in degrees, a fillet in mm; [max, max] below 1; 0 for none).
+double within_drawing(double max, std::mt19937_64& rng) {
+    if (max <= 0.0) return 0.0;
+    return std::uniform_real_distribution<double>(std::min(1.0, max), max)(rng);
+}
+
+// Whether every flat face keeps at least 0.3 mm and a fifth of its width without draft (the die
+// designer's choice of drafts; as the independent simulator, drafts are drawn again if not).
+bool faces_kept(const core::ForgedPart& undrafted, const core::ForgedPart& part) {
+    const auto& w0 = undrafted.level_faces_mm;
+    const auto& w = part.level_faces_mm;
+    if (w0.size() != w.size()) return false;
+    for (std::size_t i = 0; i < w.size(); ++i) {
+        const double width0 = std::abs(w0[i].second);
+        const double width = w0[i].second < 0 ? -w[i].second : w[i].second;
+        if (width < std::min(width0, std::max(0.3, 0.2 * width0))) return false;
+    }
+    return true;
+}
+
+// Per wall a draft in [1°, the drawing's], drawn until the flat faces are kept (faces_kept).
+core::Result<void> draw_drafts(const core::Recipe& recipe, std::mt19937_64& rng,
+                               core::ForgedShape& shape) {
+    auto undrafted = core::build_forged(recipe, shape);
+    if (!undrafted) return undrafted.error();
+    for (int attempt = 0; attempt < 1000; ++attempt) {
+        for (const auto& w : core::forged_walls(recipe))
+            shape.draft_deg[w.name] = within_drawing(recipe.draft_of(w.section), rng);
+        auto part = core::build_forged(recipe, shape);
+        if (!part) return part.error();
+        if (faces_kept(*undrafted, *part)) return {};
+    }
+    return core::make_error("simulate --forged: recipe '" + recipe.name +
+                            "': no drafts within the drawing keep its flat faces");
+}
+
+// As forged: drafts (draw_drafts), per corner a fillet in [1 mm, the drawing's] (cut down where
+// its faces are narrow), the die shift uniform in [0, 0.8 × the drawing's] at a random azimuth;
+// from a stream of their own.
+core::Result<core::ForgedPart> draw_forged(const core::Recipe& recipe, const SimOptions& opt,
+                                           const SimTruth& truth) {
+    if (!recipe.forging)
+        return core::make_error("simulate --forged: recipe '" + recipe.name + "' (" +
+                                recipe.source +
+                                ") has no 'forging' drawing (parting plane, draft, fillets, "
+                                "die shift)");
+    std::mt19937_64 rng(opt.seed ^ 0x666f72676564ull);
+    core::ForgedShape shape;
+    shape.levels_mm = truth.levels_mm;
+    shape.diameters_mm = truth.diameters_mm;
+    shape.scale = truth.growth;
+    if (auto ok = draw_drafts(recipe, rng, shape); !ok) return ok.error();
+    for (const auto& c : core::forged_corners(recipe))
+        shape.fillet_mm[c.name] = within_drawing(recipe.fillet_at(c.level), rng);
+    std::uniform_real_distribution<double> u01(0.0, 1.0);
+    double shift = 0.8 * recipe.forging->die_shift_mm * u01(rng);
+    const double azimuth = 2.0 * std::numbers::pi * u01(rng);
+    if (const auto it = opt.bad_mm.find(die_shift_name(recipe)); it != opt.bad_mm.end())
+        shift = std::max(0.0, shift + it->second);
+    shape.die_shift_mm = shift * Eigen::Vector2d(std::cos(azimuth), std::sin(azimuth));
+    return core::build_forged(recipe, shape);
+}
+
+// The features at their theoretical sharp corners, and the die shift (hub-a.md "As forged").
+void forged_features(const core::Recipe& recipe, SimTruth& truth) {
+    const core::ForgedPart& part = *truth.forged;
+    for (const auto& f : recipe.features) {
+        const double cold = part.feature_cold_mm.at(f.name);
+        truth.features.push_back({f.name, cold * truth.growth, cold});
+    }
+    if (die_shift_name(recipe) == "Die shift" &&
+        std::none_of(recipe.features.begin(), recipe.features.end(),
+                     [](const core::FeatureSpec& f) { return f.name == "Die shift"; })) {
+        const double cold = part.shape.die_shift_mm.norm();
+        truth.features.push_back({"Die shift", cold * truth.growth, cold});
     }
 }
 
@@ -69,15 +182,14 @@ std::optional<RayHit> cast_sphere(const calib::ArtifactSphere& s, const Eigen::V
 }
 
 // First hit of a world ray on the part, the artifact's spheres or (when visible) the support.
-std::optional<RayHit> cast(const core::AxisymmetricSolid& solid,
-                           const Eigen::Isometry3d& T_part_world,
+std::optional<RayHit> cast(const Scene::Solid& solid, const Eigen::Isometry3d& T_part_world,
                            const std::vector<calib::ArtifactSphere>& spheres, bool support,
                            double support_half, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
                            double t_max) {
     std::optional<RayHit> best;
     const Eigen::Vector3d op = T_part_world * o, dp = T_part_world.linear() * d;
-    if (auto h = solid.intersect(op, dp, t_max))
-        best = RayHit{h->t, T_part_world.linear().transpose() * h->normal};
+    const auto part = std::visit([&](const auto& s) { return s.intersect(op, dp, t_max); }, solid);
+    if (part) best = RayHit{part->t, T_part_world.linear().transpose() * part->normal};
     for (const auto& s : spheres)
         if (auto h = cast_sphere(s, o, d, best ? best->t : t_max)) best = h;
     if (support && d.z() < 0.0 && o.z() > 0.0) {
@@ -101,10 +213,24 @@ core::Result<Scene> Scene::create(const core::Recipe& recipe, const CellConfig& 
     truth.range_noise_mm = cell.sensor.range_noise_mm;
     truth.support_half_size_mm = cell.support_half_size_mm;
     draw_dimensions(recipe, opt.dimension_sigma_mm, rng, truth);
-    core::AxisymmetricSolid solid = truth.solid(recipe);
+    if (auto ok = apply_bad(recipe, opt, truth); !ok) return ok.error();
+    Solid solid = core::AxisymmetricSolid({}, {});
     double bottom_radius = 0.0;
-    for (const auto& s : solid.boundary())
-        if (!s.cylinder && s.value <= 1e-9) bottom_radius = std::max(bottom_radius, s.hi);
+    if (opt.forged) {
+        auto part = draw_forged(recipe, opt, truth);
+        if (!part) return part.error();
+        truth.forged = std::move(*part);
+        forged_features(recipe, truth);
+        const core::ForgedSolid forged = truth.forged->solid();
+        bottom_radius = forged.bottom_radius();
+        solid = forged;
+    } else {
+        true_features(recipe, truth);
+        const core::AxisymmetricSolid drawn = truth.solid(recipe);
+        for (const auto& s : drawn.boundary())
+            if (!s.cylinder && s.value <= 1e-9) bottom_radius = std::max(bottom_radius, s.hi);
+        solid = drawn;
+    }
     truth.T_world_part =
         opt.T_world_part ? *opt.T_world_part : random_placement(cell, bottom_radius, rng);
     if (opt.occluded_fraction > 0) {
@@ -124,7 +250,7 @@ Scene Scene::create_artifact(const calib::Artifact& artifact, const CellConfig& 
     return scene;
 }
 
-Scene::Scene(const CellConfig& cell, SimTruth truth, core::AxisymmetricSolid solid)
+Scene::Scene(const CellConfig& cell, SimTruth truth, Solid solid)
     : cell_(cell),
       truth_(std::move(truth)),
       solid_(std::move(solid)),
@@ -140,7 +266,8 @@ Scene::Scene(const CellConfig& cell, SimTruth truth, core::AxisymmetricSolid sol
 bool Scene::occluded(const Eigen::Vector3d& p_world) const {
     if (truth_.occluded_rad <= 0) return false;
     const Eigen::Vector3d q = T_part_world_ * p_world;
-    if (std::abs(solid_.distance(q)) > 1e-3) return false;  // the support, not the part
+    const double d = std::visit([&](const auto& s) { return s.distance(q); }, solid_);
+    if (std::abs(d) > 1e-3) return false;  // the support, not the part
     double a = std::atan2(q.y(), q.x()) - truth_.occluded_from_rad;
     a -= 2.0 * std::numbers::pi * std::floor(a / (2.0 * std::numbers::pi));
     return a < truth_.occluded_rad;

@@ -1,5 +1,7 @@
 #include <cstdio>
 #include <fstream>
+#include <map>
+#include <ostream>
 
 #include "hotgauge/io/npy.hpp"
 #include "hotgauge/sim/simulator.hpp"
@@ -25,6 +27,34 @@ std::string matrix_rows(const Eigen::Matrix4d& M) {
 
 std::string quoted(const std::string& s) { return "\"" + s + "\""; }
 
+void write_map(std::ostream& f, const char* key, const std::map<std::string, double>& m,
+               const char* indent = "") {
+    f << indent << key << ":" << (m.empty() ? " {}" : "") << "\n";
+    for (const auto& [k, v] : m) f << indent << "  " << quoted(k) << ": " << num(v) << "\n";
+}
+
+std::string profile(const core::ForgedSolid::Profile& p) {
+    std::string s = "[";
+    for (std::size_t i = 0; i < p.size(); ++i)
+        s += (i ? ", [" : "[") + num(p[i].x()) + ", " + num(p[i].y()) + "]";
+    return s + "]";
+}
+
+// The drawn as-forged geometry, cold, part frame (docs/simulator.md "As-forged parts").
+void write_forged(std::ostream& f, const core::ForgedPart& part) {
+    f << "forged:           # cold mm, part frame; profiles (r, z) about each half's own axis\n"
+      << "  parting_z_mm: " << num(part.parting_z_mm) << "\n"
+      << "  die_shift_mm: [" << num(part.shape.die_shift_mm.x()) << ", "
+      << num(part.shape.die_shift_mm.y()) << "]   # the upper half's axis, part x, y\n";
+    write_map(f, "draft_deg", part.draft_deg, "  ");
+    write_map(f, "fillet_mm", part.fillet_mm, "  ");
+    write_map(f, "fillet_drawn_mm", part.shape.fillet_mm, "  ");
+    f << "  profile_lower_sharp: " << profile(part.lower_sharp) << "\n"
+      << "  profile_upper_sharp: " << profile(part.upper_sharp) << "\n"
+      << "  profile_lower: " << profile(part.lower) << "\n"
+      << "  profile_upper: " << profile(part.upper) << "\n";
+}
+
 }  // namespace
 
 core::Result<void> write_truth(const SimTruth& truth, const std::filesystem::path& dir) {
@@ -47,6 +77,8 @@ core::Result<void> write_truth(const SimTruth& truth, const std::filesystem::pat
     for (const auto& [k, v] : truth.levels_mm) f << "  " << quoted(k) << ": " << num(v) << "\n";
     f << "diameters_mm:\n";
     for (const auto& [k, v] : truth.diameters_mm) f << "  " << quoted(k) << ": " << num(v) << "\n";
+    if (!truth.bad_mm.empty()) write_map(f, "bad_mm", truth.bad_mm);
+    if (truth.forged) write_forged(f, *truth.forged);
     f << "features:\n";
     for (const auto& ft : truth.features)
         f << "  - {name: " << quoted(ft.name) << ", hot_mm: " << num(ft.hot_mm)

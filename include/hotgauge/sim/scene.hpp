@@ -7,8 +7,10 @@
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <random>
+#include <variant>
 #include <vector>
 
+#include "hotgauge/core/forged.hpp"
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/result.hpp"
 #include "hotgauge/sim/simulator.hpp"
@@ -60,13 +62,16 @@ class Scene {
                       RandomStream& rng, std::vector<RayReturn>& out,
                       const ProfileEffects& effects = {}) const;
 
+    // The part as drawn (sharp, vertical, one axis) or as forged.
+    using Solid = std::variant<core::AxisymmetricSolid, core::ForgedSolid>;
+
   private:
-    Scene(const CellConfig& cell, SimTruth truth, core::AxisymmetricSolid solid);
+    Scene(const CellConfig& cell, SimTruth truth, Solid solid);
     bool occluded(const Eigen::Vector3d& p_world) const;
 
     CellConfig cell_;
     SimTruth truth_;
-    core::AxisymmetricSolid solid_;
+    Solid solid_;
     std::vector<calib::ArtifactSphere> spheres_;  // world frame
     Eigen::Isometry3d T_part_world_;
     std::vector<Eigen::Vector3d> dir_cam_;  // ray directions, camera frame

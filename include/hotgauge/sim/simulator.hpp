@@ -12,6 +12,7 @@
 
 #include "hotgauge/calib/artifact.hpp"
 #include "hotgauge/calib/calibration.hpp"
+#include "hotgauge/core/forged.hpp"
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/recording.hpp"
 #include "hotgauge/core/result.hpp"
@@ -102,6 +103,13 @@ struct SimOptions {
     // its travel_scale) and times (camera clock + its clock offset) as the cell's software writes
     // them with it. Unset: the cell's true geometry (a perfectly commissioned cell).
     std::optional<calib::Calibration> in_force;
+    // As it leaves the press (docs/simulator.md "As-forged parts"): per wall a draft, per corner
+    // a fillet and a die shift, drawn within the recipe's `forging` drawing (required), from
+    // their own stream: the same seed gives the same dimensions and pose either way.
+    bool forged = false;
+    // Bad features: a recipe feature's name (or "Die shift", forged only) -> mm added to its true
+    // value (a diameter's section, a height's upper level, the die shift's length).
+    std::map<std::string, double> bad_mm;
 };
 
 struct FeatureTruth {
@@ -127,7 +135,11 @@ struct SimTruth {
     double range_noise_mm = 0;
     double support_half_size_mm = 0;
     double occluded_from_rad = 0, occluded_rad = 0;  // occluded sector, part-frame azimuth
-    // The hot part as scanned, part frame.
+    std::map<std::string, double> bad_mm;            // SimOptions::bad_mm as applied
+    // As forged: the drawn shape, profiles and sharp-corner features (cold); its hot solid is
+    // forged->solid(). Unset: sharp corners, vertical walls, one axis (solid() below).
+    std::optional<core::ForgedPart> forged;
+    // The hot part as scanned, part frame (when not forged).
     core::AxisymmetricSolid solid(const core::Recipe& recipe) const {
         return core::AxisymmetricSolid::from_recipe(recipe, levels_mm, diameters_mm, growth);
     }
