@@ -130,6 +130,7 @@ bench: build
 	/usr/bin/python3 tests/bench/daemon_latency.py $(BUILD) --parts 5
 	/usr/bin/python3 tests/bench/accel_loss.py $(BUILD) --recordings 4 --loss-seeds 2
 	/usr/bin/python3 tests/bench/lot_report.py $(BUILD)
+	/usr/bin/python3 tests/bench/forged_sorting.py $(BUILD) --parts 60 --first-seed 1000 --bad-every 3
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')

@@ -70,8 +70,8 @@ sim::SimResult simulate(const sim::CellConfig& cell, std::uint64_t seed, double 
 }
 
 // hub-a as the drawing's idealisation, without its forging notes (sharp corners, vertical walls,
-// one axis): the side heights from their side scan alone, no die shift. What recipes without a
-// `forging` key measure (docs/recipes.md).
+// one axis): the side heights from their side scan alone, the diameters from the face that sees
+// their edge, no die shift. What recipes without a `forging` key measure (docs/recipes.md).
 const core::Recipe& ideal_recipe() {
     static const core::Recipe r = [] {
         core::Recipe out = env().recipe;
@@ -79,9 +79,9 @@ const core::Recipe& ideal_recipe() {
         std::vector<core::FeatureSpec> kept;
         for (auto f : out.features) {
             if (f.kind == core::FeatureKind::kDieShift) continue;
-            if (f.kind == core::FeatureKind::kHeight &&
+            if (f.kind == core::FeatureKind::kDiameter ||
                 f.height_method == core::HeightMethod::kEdges)
-                f.faces.resize(1);  // its side scan
+                f.faces.resize(1);  // the face that sees the edge; a height's side scan
             kept.push_back(f);
         }
         out.features = kept;
@@ -185,7 +185,7 @@ sim::SimResult scan_of_a_120_degree_arc() {
 
 TEST(MeasureRobustness, DiameterOnA120DegreeArc) {
     const auto s = scan_of_a_120_degree_arc();
-    const auto m = measure::measure_part(env().recipe, s.recording, s.truth.T_world_part);
+    const auto m = measure::measure_part(ideal_recipe(), s.recording, s.truth.T_world_part);
     const auto& d3 = feature(m, "Diameter 3");
     ASSERT_TRUE(d3.hot_mm) << d3.reason;
     EXPECT_NEAR(d3.arc_deg, 120.0, 20.0);
@@ -205,7 +205,7 @@ TEST(MeasureRobustness, PartialArcWithAnOffsetPoseIsNotMeasured) {
     const auto s = scan_of_a_120_degree_arc();
     Eigen::Isometry3d off = s.truth.T_world_part;
     off.translation().y() += 0.3;
-    const auto m = measure::measure_part(env().recipe, s.recording, off);
+    const auto m = measure::measure_part(ideal_recipe(), s.recording, off);
     const auto& d3 = feature(m, "Diameter 3");
     EXPECT_FALSE(d3.hot_mm) << *d3.hot_mm;
     EXPECT_NE(d3.reason.find("free fit"), std::string::npos) << d3.reason;
@@ -225,7 +225,7 @@ TEST(MeasureRobustness, NonFiniteAndOffRaySamplesDoNotDerail) {
         else
             f.profiles_mm[2 * q + 1] = 3e4f;  // x unchanged: off the ray
     }
-    const auto m = measure::measure_part(env().recipe, s.recording, s.truth.T_world_part);
+    const auto m = measure::measure_part(ideal_recipe(), s.recording, s.truth.T_world_part);
     for (const char* name : {"Diameter 3", "Diameter 5", "Diameter 7"}) {
         const auto& d = feature(m, name);
         ASSERT_TRUE(d.hot_mm) << name << ": " << d.reason;

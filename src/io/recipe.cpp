@@ -224,11 +224,14 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
         }
 
         if (const YAML::Node m = root["matching"]) {
-            y.expect_map(m, "matching", {"sampling_mm", "min_score"});
+            y.expect_map(m, "matching", {"sampling_mm", "min_score", "score_band_mm"});
             r.matching.sampling_mm = y.number_or(m, "matching", "sampling_mm", 5.0);
             r.matching.min_score = y.number_or(m, "matching", "min_score", 0.8);
             if (!(r.matching.sampling_mm >= 0.5 && r.matching.sampling_mm <= 50.0))
                 y.fail(m["sampling_mm"], "matching.sampling_mm: expected 0.5 .. 50 mm");
+            r.matching.score_band_mm = y.number_or(m, "matching", "score_band_mm", 0.0);
+            if (!(r.matching.score_band_mm >= 0.0 && r.matching.score_band_mm <= 5.0))
+                y.fail(m["score_band_mm"], "matching.score_band_mm: expected 0 .. 5 mm");
             if (!(r.matching.min_score > 0.0 && r.matching.min_score < 1.0))
                 y.fail(m["min_score"], "matching.min_score: expected a fraction in (0, 1)");
         }

@@ -309,8 +309,8 @@ MatchResult match(const Model& model, const core::Recording& rec, const core::Fa
     fine.free_radii = true;
     auto fin = detail::icp(surface, model, dense, best->icp.T_world_part, best->icp.scale, fine);
     res.stage_ms.emplace_back("icp", ms_since(t3));
-    const auto sup = detail::support(surface, dense, fin.T_world_part, fin.scale,
-                                     cfg.inlier_band_mm, cfg.inlier_band_mm);
+    const double band = cfg.score_band_mm > 0 ? cfg.score_band_mm : cfg.inlier_band_mm;
+    const auto sup = detail::support(surface, dense, fin.T_world_part, fin.scale, band, band);
     res.T_world_part = model.axisymmetric ? canonical_spin(fin.T_world_part) : fin.T_world_part;
     res.scale = fin.scale;
     res.scale_estimated = est_scale;

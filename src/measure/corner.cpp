@@ -74,8 +74,8 @@ struct Solve {
 };
 Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, double side, Vec5 x,
             const CornerPrior& prior) {
-    const double t_mean = 0.5 * prior.t_max;
-    const double t_sigma = std::max(prior.t_max, 1e-3) / std::sqrt(12.0);
+    const double t_mean = prior.t_mean(), t_sigma = prior.t_sigma();
+    const double hold = prior.fix_draft ? 1e10 : 1.0;  // a held draft: the prior alone
     double lambda = 1e-3;
     auto cost = [&](const Vec5& v, Mat5* JtJ, Vec5* Jte, double* sse, std::size_t* n) {
         Mat5 A = Mat5::Zero();
@@ -105,7 +105,7 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
     cost(x, &A, &b, &sse, &n);
     const double sigma2 = std::max(sse / static_cast<double>(std::max<std::size_t>(n, 1)), 1e-6);
     auto with_prior = [&](const Vec5& v, Mat5& M, Vec5& g, double& c) {
-        const double w = sigma2 / (t_sigma * t_sigma);
+        const double w = hold * sigma2 / (t_sigma * t_sigma);
         M(3, 3) += w;
         g[3] += w * (v[3] - t_mean);
         c += w * (v[3] - t_mean) * (v[3] - t_mean);
@@ -134,11 +134,19 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
             if (lambda > 1e8) break;
         }
     }
-    cost(x, &A, nullptr, &sse, &n);  // the data's normal matrix and scatter at the solution
-    return {x, A, std::sqrt(sse / static_cast<double>(std::max<std::size_t>(n, 1)))};
+    // The normal matrix at the solution with the prior in it: where the samples do not fix the
+    // draft (a wall out of view), its covariance is the prior's, and u says what that costs.
+    cost(x, &A, nullptr, &sse, &n);
+    const double rms2 = sse / static_cast<double>(std::max<std::size_t>(n, 1));
+    A(3, 3) += std::max(rms2, 1e-6) / (t_sigma * t_sigma);  // held or not: the draft's u
+    return {x, A, std::sqrt(rms2)};
 }
 
 }  // namespace
+
+double CornerPrior::t_sigma() const {
+    return t_known_u ? std::max(*t_known_u, 1e-4) : std::max(t_max, 1e-3) / std::sqrt(12.0);
+}
 
 double corner_residual(const CornerModel& m, double side, const CornerPoint& p, int* part) {
     return residual(m, side, p, nullptr, part);

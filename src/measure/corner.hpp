@@ -53,6 +53,13 @@ struct CornerModel {
 struct CornerPrior {
     double t_max = 0;    // tan of the drawing's largest draft
     double rho_max = 0;  // the drawing's largest fillet radius
+    // The wall is out of view: the draft is held (at t_known, else the middle of the drawing's
+    // range), and its uncertainty t_sigma enters u_radius.
+    bool fix_draft = false;
+    // A draft measured elsewhere (the wall seen broadside by another face): held there instead.
+    std::optional<double> t_known = std::nullopt, t_known_u = std::nullopt;
+    double t_mean() const { return t_known ? *t_known : 0.5 * t_max; }
+    double t_sigma() const;  // the drawing's range / √12, or the measured draft's u
 };
 
 struct CornerFit {
@@ -77,8 +84,11 @@ double corner_residual(const CornerModel& m, double side, const CornerPoint& p, 
 // corner profile fitted on the samples of its plane, fillet and wall (recipes with a forging
 // drawing). Returns false, leaving `r` as it was, when nothing beyond the plane is seen (a sharp
 // edge over a wall out of view): the edge brackets measure that corner. `side`: +1 outer edge.
+// `wall_frames`: faces that see the wall broadside but not the plane (side scans), for the draft
+// when the plane's faces do not see the wall.
 bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
-                     const std::vector<const FaceFrame*>& frames, const EdgePlane& ep, double side,
-                     FeatureResult& r);
+                     const std::vector<const FaceFrame*>& frames,
+                     const std::vector<const FaceFrame*>& wall_frames, const EdgePlane& ep,
+                     double side, FeatureResult& r);
 
 }  // namespace hotgauge::measure::detail

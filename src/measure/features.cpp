@@ -156,6 +156,14 @@ detail::Expect expect(const core::Recipe& recipe, const core::Recording& rec,
     return ex;
 }
 
+// A forging's level may sit as far off nominal as a sorting gauge must follow (hub-a.md: at
+// least ±1.5 mm): the level planes are looked for that much farther.
+constexpr double kSortingWindowMm = 1.5;
+MeasureConfig for_recipe(const core::Recipe& recipe, MeasureConfig c) {
+    if (recipe.forging) c.plane_band_mm += kSortingWindowMm;
+    return c;
+}
+
 }  // namespace
 
 const char* to_string(Verdict v) {
@@ -204,7 +212,7 @@ struct PartMeasurer::Impl {
         : rec(r),
           T_part_world(T_world_part.inverse()),
           ctx{recipe, core::AxisymmetricSolid::from_recipe(recipe),
-              expect(recipe, r, config, growth), config},
+              expect(recipe, r, config, growth), for_recipe(recipe, config)},
           bounds(part_bounds(ctx)),
           measured(recipe.features.size()) {}
 

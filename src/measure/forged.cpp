@@ -27,6 +27,8 @@ namespace {
 constexpr std::int64_t kMinProfileSamples = 200;
 // A fitted fillet smaller than this is a sharp edge: the brackets pin it better than the profile.
 constexpr double kSharpRhoMm = 0.1;
+// Fewer wall samples than this do not fix the wall's draft.
+constexpr std::int64_t kMinWallSamples = 150;
 // The profile's samples scatter by the range noise (0.05 mm); far more is not this corner.
 constexpr double kMaxRmsMm = 0.2;
 
@@ -99,42 +101,97 @@ std::string refusal(const CornerFit& fit, const CornerPrior& prior, double R_e, 
     return {};
 }
 
+// The wall's draft from faces that see it broadside (side scans): the slope of its samples'
+// distance beyond the corner circle against their height, between the fillets. Only the slope is
+// taken from them, so their registration against the plane's faces does not enter: an offset
+// of a face moves s, not ds/dh. Nothing when they see too little of it.
+struct Draft {
+    double t, u;
+};
+std::optional<Draft> wall_draft(const std::vector<const FaceFrame*>& wall_frames,
+                                const EdgePlane& ep, double side, const CornerModel& m,
+                                double depth, double t_max) {
+    constexpr std::size_t kMinSamples = 200;
+    constexpr double kMinSpanMm = 2.0, kBandMm = 0.5;
+    const double h_top = -(m.rho + 0.5), h_bottom = -depth;
+    if (wall_frames.empty() || h_top - h_bottom < kMinSpanMm) return std::nullopt;
+    const auto pts = corner_points(wall_frames, ep, side, m.centre, m.radius, kBandMm,
+                                   kBandMm + t_max * depth, depth);
+    std::vector<Eigen::Vector2d> sh;  // (h, s) on the wall's straight part
+    for (const auto& p : pts)
+        if (p.h <= h_top) sh.emplace_back(p.h, side * ((p.q - m.centre).norm() - m.radius));
+    for (int round = 0; round < 3; ++round) {
+        if (sh.size() < kMinSamples) return std::nullopt;
+        Eigen::Matrix2d A = Eigen::Matrix2d::Zero();
+        Eigen::Vector2d b = Eigen::Vector2d::Zero();
+        for (const auto& v : sh) {
+            const Eigen::Vector2d row(1.0, v.x());
+            A += row * row.transpose();
+            b += row * v.y();
+        }
+        const Eigen::Vector2d k = A.ldlt().solve(b);
+        double sse = 0;
+        for (const auto& v : sh) sse += std::pow(v.y() - k[0] - k[1] * v.x(), 2);
+        const double sigma = std::sqrt(sse / static_cast<double>(sh.size() - 2));
+        if (round == 2) return Draft{-k[1], sigma * std::sqrt(A.inverse()(1, 1))};
+        std::erase_if(sh, [&](const Eigen::Vector2d& v) {
+            return std::abs(v.y() - k[0] - k[1] * v.x()) > std::max(3.0 * sigma, 0.02);
+        });
+    }
+    return std::nullopt;
+}
+
 }  // namespace
 
 bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
-                     const std::vector<const FaceFrame*>& frames, const EdgePlane& ep, double side,
-                     FeatureResult& r) {
+                     const std::vector<const FaceFrame*>& frames,
+                     const std::vector<const FaceFrame*>& wall_frames, const EdgePlane& ep,
+                     double side, FeatureResult& r) {
     const core::ForgingSpec& forging = *ctx.recipe.forging;
-    const CornerPrior prior{std::tan(ctx.recipe.draft_of(f.section) / kRadToDeg),
-                            ctx.recipe.fillet_at(f.edge_at)};
+    CornerPrior prior{std::tan(ctx.recipe.draft_of(f.section) / kRadToDeg),
+                      ctx.recipe.fillet_at(f.edge_at)};
     const double depth = wall_depth(ctx, f);
     const double R_e = ctx.ex.z(0.5 * ctx.recipe.section(f.section)->diameter_mm);
     // Where the corner may be: the window of a sorting gauge and the die shift about the axis.
     const double slack = ctx.ex.tol(ctx.c.edge_window_mm, R_e) * 0.5 + forging.die_shift_mm;
     CornerModel m{ep.axis2d(), R_e, 0.5 * prior.t_max, 0.5 * prior.rho_max};
     std::optional<CornerFit> fit;
-    // Wide around the expected circle, then tight around the fitted one.
+    // Wide around the expected circle, then tight around the fitted one. A wall seen too little
+    // to fix its own draft (top and bottom sensors lose a 1-3° wall at grazing incidence): the
+    // draft held at the drawing's middle, and its uncertainty in u.
     for (int pass = 0; pass < 2; ++pass) {
         const double s_in = pass == 0 ? prior.rho_max + 1.0 + slack : m.rho + 1.5;
         const double s_out = (pass == 0 ? slack + 0.5 : 0.5) + prior.t_max * depth;
         const auto pts = corner_points(frames, ep, side, m.centre, m.radius, s_in, s_out, depth);
+        prior.fix_draft = false;
         fit = fit_corner(pts, side, m, prior);
-        if (fit->n_arc + fit->n_wall < kMinProfileSamples || !fillet_seen(*fit, s_in)) {
-            r.reason.clear();
+        // Sharp, or nothing beyond the plane: the edge brackets (decided on the free fit).
+        if (fit->n_arc + fit->n_wall < kMinProfileSamples || !fillet_seen(*fit, s_in) ||
+            fit->m.rho < kSharpRhoMm)
             return false;
+        if (fit->n_wall < kMinWallSamples) {
+            prior.fix_draft = true;
+            if (const auto d = wall_draft(wall_frames, ep, side, fit->m, depth, prior.t_max)) {
+                prior.t_known = d->t;
+                prior.t_known_u = d->u;
+            }
+            fit = fit_corner(pts, side, {m.centre, m.radius, prior.t_mean(), m.rho}, prior);
         }
         m = fit->m;
     }
-    if (fit->m.rho < kSharpRhoMm) return false;
     if (const std::string why = refusal(*fit, prior, R_e, slack, ep.axis2d()); !why.empty()) {
         r.reason = "corner of '" + f.section + "' at '" + f.edge_at + "': " + why;
         return true;
     }
     r.hot_mm = 2.0 * m.radius;
     r.u_budget = {{"fit", 2.0 * fit->u_radius}, {"compensation", ep.profile_scatter}};
+
     r.fit_rms_mm = fit->rms;
     r.n_points = fit->n_arc + fit->n_wall;
-    r.method = "corner profile";
+    // The draft's own uncertainty is in the fit's (the prior's row of the normal matrix).
+    r.method = !prior.fix_draft ? "corner profile"
+               : prior.t_known  ? "corner profile, draft from the side faces"
+                                : "corner profile, draft from the drawing";
     r.arc_deg = 45.0 * static_cast<double>(fit->sector_radius.size());
     r.n_sectors = static_cast<int>(fit->sector_radius.size());
     if (fit->sector_radius.size() >= 2) r.sector_spread_mm = 2.0 * sample_std(fit->sector_radius);

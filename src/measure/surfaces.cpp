@@ -212,8 +212,11 @@ void keep_flat_part(PlaneResult& pl, bool narrow, const MeasureConfig& c, const 
 }  // namespace
 
 bool Context::faces_sensors(const Annulus& a, const std::vector<const FaceFrame*>& frames) {
+    // A face seen at less than about 6° is edge-on (a horizontal side sensor and the flange
+    // underside, tilted by a matched pose's few µrad), not seen.
+    constexpr double kMinViewZ = 0.1;
     for (const auto* fr : frames)
-        if (a.facing * fr->view.z() >= 0) return false;
+        if (a.facing * fr->view.z() > -kMinViewZ) return false;
     return true;
 }
 

@@ -176,6 +176,7 @@ std::optional<Eigen::Isometry3d> PartRun::Impl::find_pose() {
     }
     match::MatchConfig cfg = o.match;
     cfg.min_score = recipe.matching.min_score;
+    cfg.score_band_mm = recipe.matching.score_band_mm;
     // The hot part is larger than the cold model: scale it when the temperature is known, let
     // ICP estimate the scale when it is not.
     if (rec.temperature_c) cfg.scale = recipe.material.growth(*rec.temperature_c);

@@ -20,13 +20,17 @@ def main():
     ap.add_argument("recording_dir", help="folder with part/ and truth.json")
     ap.add_argument("--limit", type=float)
     ap.add_argument("--part-pose", action="store_true", help="measure at the true pose")
+    ap.add_argument("--max-not-measured", type=int, default=0,
+                    help="features besides Height 1 that may be NOT_MEASURED")
+    ap.add_argument("--nok", default=None,
+                    help="comma-separated features that must read NOK, all others not NOK")
     ap.add_argument("extra", nargs="*")
     a = ap.parse_args()
     truth = json.load(open(f"{a.recording_dir}/truth.json"))
     cmd = [a.hotgauge, "measure", f"{a.recording_dir}/part", "--json", *a.extra]
     out = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
     got = {f["name"]: f for f in out["features"]}
-    bad = 0
+    bad = not_measured = 0
     print(f"{a.recording_dir}: verdict {out['verdict']}")
     for t in truth["features"]:
         k = key(t["face"], t["name"])
@@ -34,14 +38,21 @@ def main():
         if f is None or f["hot_mm"] is None:
             why = "absent" if f is None else f["reason"]
             print(f"  {k:18s} not measured: {why}")
-            bad += not k.startswith("Height 1")
+            not_measured += not k.startswith("Height 1")
             continue
         err = f["hot_mm"] - t["true_hot"]
         flag = a.limit is not None and abs(err) > a.limit
         bad += flag
         print(f"  {k:18s} {err:+.4f} u {f['u_mm']:.4f} {f['verdict']:12s} {f['method']}"
               f"{'  <-- off' if flag else ''}")
-    if a.limit is not None and bad:
+    bad += not_measured > a.max_not_measured
+    if a.nok is not None:
+        want = set(a.nok.split(",")) if a.nok else set()
+        got_nok = {f["name"] for f in out["features"] if f["verdict"] == "NOK"}
+        if got_nok != want:
+            print(f"  NOK on {sorted(got_nok)}, expected {sorted(want)}")
+            bad += 1
+    if bad:
         sys.exit(1)
 
 

@@ -51,6 +51,7 @@ struct FeatureSpec {
 struct MatchingSpec {
     double sampling_mm = 5.0;  // model and scene sampling distance of the PPF voting
     double min_score = 0.8;    // fraction of scan points near the part that lie on the model
+    double score_band_mm = 0;  // "on the model" within this (0: matching's own 0.3 mm)
 };
 
 // What the forging drawing allows (docs/recipes.md "The forging drawing"); recipe key `forging`.

@@ -27,7 +27,10 @@ struct MatchConfig {
     double icp_stop_mm = 1e-4;  // stop when the largest point motion is below this
     // Verdict
     double inlier_band_mm = 0.3;  // a scan point this close to the fitted surface supports it
-    double min_score = 0.6;       // found when score >= this (recipe matching.min_score)
+    // The score's band (0: inlier_band_mm): a part off nominal by as much as a sorting gauge must
+    // follow still lies within it, so the score finds the part and never checks a dimension.
+    double score_band_mm = 0.0;
+    double min_score = 0.6;  // found when score >= this (recipe matching.min_score)
     std::int64_t min_inliers = 500;
     // Model scale (thermal growth): fixed when known, else estimated by ICP.
     std::optional<double> scale;
