@@ -954,8 +954,8 @@ def main():
         text, worst = table(produced, line)
         print("\n" + text)
         csvs, jsonls, seqs, lines = check_results_files(line.results_dir, parts)
-        master_worst = check_masters(line.results_dir, parts, lines) if line.masters else None
         sorting = check_sorting(line, parts, lines) if (a.forged or bad) else None
+        master_worst = check_masters(line.results_dir, parts, lines) if line.masters else None
         delays = check_plc_status(a.bin_dir, parts, lines, calibrated=bool(cal))
         if delays:
             print(f"PLC scan phase 2 ('part may move'): {min(delays) * 1e3:.1f} to "

@@ -163,6 +163,11 @@ int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cel
     a.vc.master = opt;  // a cold master: one physical part, below the pyrometer's span
     a.vc.master.seed = a.master_seed;
     a.vc.master.temperature_c = 20.0;
+    // The master is a machined reference with the drawing's idealised shape (sharp, vertical, one
+    // axis), so that every feature has a certified value (a forging's Height 1 may have no flat
+    // part to measure); never bad. docs/virtual-cell.md "The master".
+    a.vc.master.forged = false;
+    a.vc.master.bad_mm.clear();
     a.vc.line_period_s = 1.0 / a.line_rate_hz;
     if (!a.pyrometer_device.empty()) {
         plc::SerialConfig serial;  // 9600 8N1, slave 1: the defaults
