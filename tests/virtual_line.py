@@ -997,7 +997,7 @@ def main():
         check_notifications(line.notify)
         assert all(p["state"] == DONE for p in parts), "a part was not measured"
         assert not (sorting and sorting[3]), \
-            f"{len(sorting[3])} PLC verdicts differ from the truth's: {sorting[3]}"
+            f"{len(sorting[3])} PLC verdicts differ from the truth's (WRONG: under 'sorting')"
         if a.check_mm is not None:
             assert worst <= a.check_mm, f"worst error {worst:.4f} mm > {a.check_mm} mm"
             if not sorting:  # else check_sorting checked every verdict against the truth
