@@ -649,6 +649,50 @@ TEST(VirtualCell, TheMasterIsTheSamePartEachTime) {
     }
 }
 
+// Bad parts (--bad-part): part N alone has its features moved, on top of every part's; a master
+// part is never bad; a bad part that cannot be built stops the cell at start, naming it.
+TEST(VirtualCell, BadPartsAreBadAloneAndCheckedAtStart) {
+    vcell::VirtualCellConfig c;
+    c.part.seed = 40;
+    c.part.bad_mm = {{"Height 2", -0.5}};
+    c.master = c.part;
+    c.master.bad_mm.clear();
+    c.master_parts = {9};
+    c.bad_parts = {{4, {{"Diameter 3", 0.7}, {"Height 2", 0.125}}}};
+    for (int n = 1; n <= 12; ++n) {
+        const auto o = vcell::conveyor_options(c, n);
+        if (n == 9) {
+            EXPECT_TRUE(o.bad_mm.empty());
+        } else if (n == 4) {
+            ASSERT_EQ(o.bad_mm.size(), 2u);
+            EXPECT_DOUBLE_EQ(o.bad_mm.at("Diameter 3"), 0.7);
+            EXPECT_DOUBLE_EQ(o.bad_mm.at("Height 2"), -0.375);
+        } else {
+            EXPECT_EQ(o.bad_mm, c.part.bad_mm) << "part " << n;
+        }
+    }
+
+    auto recipe = io::read_recipe(HOTGAUGE_SOURCE_DIR "/config/parts/hub-a.yaml");
+    ASSERT_TRUE(recipe.ok());
+    auto cell = sim::read_cell_config(HOTGAUGE_SOURCE_DIR "/config/cell.yaml");
+    ASSERT_TRUE(cell.ok());
+    vcell::VirtualCellConfig v;
+    v.recipe = *recipe;
+    v.cell = *cell;
+    v.bad_parts = {{5, {{"Diameter 9", 0.5}}}};
+    auto started = vcell::VirtualCell::start(v);
+    ASSERT_FALSE(started.ok());
+    EXPECT_NE(started.error().message.find("bad part 5"), std::string::npos)
+        << started.error().message;
+    EXPECT_NE(started.error().message.find("Diameter 9"), std::string::npos)
+        << started.error().message;
+    v.bad_parts = {{2, {{"Die shift", 0.6}}}};  // a die shift needs an as-forged part
+    started = vcell::VirtualCell::start(v);
+    ASSERT_FALSE(started.ok());
+    EXPECT_NE(started.error().message.find("--forged"), std::string::npos)
+        << started.error().message;
+}
+
 // A scripted PLC loads part 3 through the axis controller's registers 6 and 7: its truth is on
 // disk when register 7 says so, the camera's part and the pyrometer follow.
 TEST(VirtualCell, APlcLoadsAnotherPartOverModbus) {

@@ -18,6 +18,14 @@ it running, `hotgauge calibrate faces` and `calibrate clock` measure the geometr
 runs on that calibration; afterwards every part's archived recording is measured again with the
 nominal calibration, to show what commissioning changed.
 
+With --forged the parts are as they leave the press (docs/simulator.md "As-forged parts": drafted,
+filleted, die-shifted, scattered), and with --bad-parts K, K of them (chosen from --seed) have one
+or two features moved out of tolerance by 0.4–0.8 mm (`simulate --serve --bad-part`). Then the
+PLC's registers must read NOK on exactly the features each part's truth puts out of tolerance and
+OK on every other feature of every part; Height 1 may read NOT_MEASURED on a forged part (its
+bore step ring can be all fillet, docs/measurement.md "Real forgings"), and a part whose only
+non-OK feature it is reads NOT_MEASURED. Both are counted and printed.
+
 With --master-at K the cold master (docs/verification.md) comes down the conveyor after part K,
 twice: once triggered in master slot 9, whose certificate is written from the master's truth (as
 a CMM lab would certify it), and once in slot 10, whose certificate has Diameter 3 0.05 mm off.
@@ -296,7 +304,7 @@ class Line:
 
     def __init__(self, bin_dir, workdir, address, seed=1, temperature=1050.0, config_extra="",
                  archive_every_nth_ok=0, calibration=None, true_calibration=None,
-                 master_parts=()):
+                 master_parts=(), forged=False, bad_parts=None):
         self.bin_dir, self.workdir, self.address = bin_dir, workdir, address
         self.seed, self.temperature = seed, temperature
         self.procs = []
@@ -316,6 +324,8 @@ class Line:
         self.true_calibration = true_calibration  # None: the cell config's geometry
         self.master_parts = list(master_parts)  # conveyor numbers that bring the cold master
         self.masters = {}  # slot: certificate path, written by certify_master()
+        self.forged = forged  # the parts as forged (simulate --forged)
+        self.bad_parts = bad_parts or {}  # conveyor number: ["NAME=DELTA", ...]
 
     def start(self):
         self.start_pty()
@@ -342,6 +352,9 @@ class Line:
                 "--truth-dir", self.truth_dir, "--pyrometer-device", self.pyrometer_sim_dev] + \
                (["--true-calibration", self.true_calibration] if self.true_calibration else []) + \
                [a for n in self.master_parts for a in ("--master-part", str(n))] + \
+               (["--forged"] if self.forged else []) + \
+               [a for n, bad in self.bad_parts.items() for b in bad
+                for a in ("--bad-part", f"{n}:{b}")] + \
                list(getattr(self, "cell_extra", []))
 
     def start_cell(self, accel_to=None):
@@ -457,6 +470,10 @@ status_page: {{bind_address: 127.0.0.1, port: 0}}
         path = os.path.join(self.truth_dir, f"part-{n:04d}", "truth.yaml")
         t = yaml.safe_load(open(path))
         return {f["name"]: f["cold_mm"] for f in t["features"]}
+
+    def truth_bad_mm(self, n):
+        path = os.path.join(self.truth_dir, f"part-{n:04d}", "truth.yaml")
+        return yaml.safe_load(open(path)).get("bad_mm") or {}
 
 
 def run_part(plc, conveyor, n, part_id, timeout=90, slot=1, face=0):
@@ -760,6 +777,99 @@ def measure_archived(line, parts, calibration):
     return found, not_measured, total, worst
 
 
+# Bad features (--bad-parts): a part's first from these (±0.3 mm tolerances; Height 1 left out,
+# it may be NOT_MEASURED on a forged part), its second, if any, a diameter. Deltas 0.4–0.8 mm
+# either way; a die shift's is added to the drawn one (≤ 0.4 mm), so 0.6–0.8 mm.
+BAD_FIRST = ["Diameter 2", "Diameter 3", "Diameter 4", "Diameter 5", "Diameter 6", "Diameter 7",
+             "Height 2", "Height 3 side1", "Die shift"]
+BAD_SECOND = ["Diameter 2", "Diameter 3", "Diameter 4", "Diameter 5", "Diameter 6", "Diameter 7"]
+VERDICT_MARGIN_MM = 0.02  # a truth this close to a limit has no verdict to check
+
+
+def bad_schedule(seed, n_parts, k):
+    """Which of the produced parts 1..n_parts are bad and how: {part: ["NAME=DELTA", ...]},
+    k parts, drawn from the seed."""
+    import random
+    rng = random.Random(f"hotgauge bad parts {seed}")
+    out = {}
+    for n in sorted(rng.sample(range(1, n_parts + 1), min(k, n_parts))):
+        first = rng.choice(BAD_FIRST)
+        names = [first] + ([rng.choice([b for b in BAD_SECOND if b != first])]
+                           if rng.random() < 0.5 else [])
+        bad = []
+        for name in names:
+            if name == "Die shift":
+                bad.append(f"{name}={rng.uniform(0.6, 0.8):+.2f}")
+            else:
+                bad.append(f"{name}={rng.choice([-1, 1]) * rng.uniform(0.4, 0.8):+.2f}")
+        out[n] = bad
+    return out
+
+
+def check_sorting(line, parts, lines):
+    """The PLC's feature verdicts against each part's truth: NOK on exactly the features out of
+    tolerance, OK on the others; Height 1 may be NOT_MEASURED (then the part reads NOT_MEASURED
+    unless a feature is NOK). Prints one line per part, and every verdict that differs from the
+    truth's; returns (bad parts, NOK features read, parts with Height 1 not measured, the
+    differences)."""
+    recipe = yaml.safe_load(open(os.path.join(REPO, "config/parts/hub-a.yaml")))
+    specs = {f["slot"]: f for f in recipe["features"]}
+    by_seq = {j["sequence"]: j for j in lines}
+    n_bad = n_nok = n_h1 = 0
+    wrong = []
+    print("\nsorting: the PLC's feature verdicts against each part's truth")
+    for p in parts:
+        if p["slot"] != 1:
+            continue
+        if p["state"] != DONE:
+            wrong.append(f"part {p['part']}: not measured (FAULT {p['error']})")
+            continue
+        truth = line.truth(p["part"])
+        jf = {f["slot"]: f for f in by_seq[p["sequence"]]["part"]["features"]}
+        want_nok, unsure, nok, not_measured, differ = [], [], [], [], []
+        for slot, spec in sorted(specs.items()):
+            name = spec["name"]
+            lo, hi = (spec["nominal_mm"] + t for t in spec["tolerance_mm"])
+            cold = truth[name]
+            out = cold < lo or cold > hi
+            want = "NOK" if out else "OK"
+            got = p["features"][slot]["verdict"]
+            if out:
+                want_nok.append(name)
+            if got == "NOK":
+                nok.append(name)
+            if min(abs(cold - lo), abs(cold - hi)) <= VERDICT_MARGIN_MM:
+                unsure.append(name)
+            elif got == "NOT_MEASURED" and name == "Height 1" and not out:
+                not_measured.append(f"Height 1 ({jf[slot].get('reason')})")
+            elif got != want:
+                measured = p["features"][slot]["mm"] if p["features"][slot]["um"] is not None \
+                    else None
+                differ.append(f"{name} reads {got}, truth {cold:.4f} mm is "
+                              f"{'outside' if out else 'inside'} {lo:.3f}..{hi:.3f}"
+                              + (f" (measured {measured:.4f})" if measured is not None else
+                                 f" ({jf[slot].get('reason')})"))
+        want_part = "NOK" if want_nok else "NOT_MEASURED" if not_measured else "OK"
+        if not unsure and not differ and p["verdict"] != want_part:
+            differ.append(f"part verdict {p['verdict']}, expected {want_part}")
+        bad = line.truth_bad_mm(p["part"])
+        n_bad += bool(bad)
+        n_nok += len(nok)
+        n_h1 += bool(not_measured)
+        what = ", ".join(f"{k}={v:+.2f}" for k, v in bad.items()) if bad else "good"
+        print(f"  part {p['part']:2d} ({what}): out of tolerance by the truth: "
+              f"{', '.join(want_nok) or 'none'}; PLC NOK: {', '.join(nok) or 'none'}; "
+              f"OK: {sum(1 for s in specs if p['features'][s]['verdict'] == 'OK')} features"
+              + (f"; not measured: {', '.join(not_measured)}" if not_measured else "")
+              + (f"; within {VERDICT_MARGIN_MM} mm of a limit (not checked): {', '.join(unsure)}"
+                 if unsure else "")
+              + f"; part verdict {p['verdict']}", flush=True)
+        for d in differ:
+            print(f"    WRONG: {d}", flush=True)
+        wrong += [f"part {p['part']}: {d}" for d in differ]
+    return n_bad, n_nok, n_h1, wrong
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--bin-dir", default=os.path.join(REPO, "build"))
@@ -781,6 +891,11 @@ def main():
                     help="after each part, the status page in Chromium (status_page_check.py)")
     ap.add_argument("--status-page-screenshot", metavar="PNG",
                     help="with --check-status-page: the last page's screenshot here")
+    ap.add_argument("--forged", action="store_true",
+                    help="the parts as forged: drafted, filleted, die-shifted (simulate --forged)")
+    ap.add_argument("--bad-parts", type=int, default=0, metavar="K",
+                    help="K of the parts (chosen from --seed) with one or two features out of "
+                         "tolerance; the PLC must read NOK on exactly those")
     ap.add_argument("--check-nominal-mm", type=float,
                     help="with --commission: fail unless, with the nominal geometry, a part is not "
                          "found, a feature not measured, or one off by at least this much")
@@ -801,9 +916,16 @@ def main():
     if a.master_at is not None:
         k = a.master_at
         runs = runs[:k] + [(k + 1, 9), (k + 2, 10)] + [(n + 2, 1) for n, _ in runs[k:]]
+    # Bad parts: numbered among the produced parts, sent as conveyor numbers.
+    produced_numbers = [n for n, slot in runs if slot == 1]
+    bad = {produced_numbers[i - 1]: b
+           for i, b in bad_schedule(a.seed, a.parts, a.bad_parts).items()} if a.bad_parts else {}
+    for n, b in bad.items():
+        print(f"bad part: conveyor part {n}: {', '.join(b)}", flush=True)
     line = Line(a.bin_dir, workdir, a.address, seed=a.seed, calibration=cal,
                 true_calibration=truth, archive_every_nth_ok=1 if cal else 0,
-                master_parts=[n for n, slot in runs if slot != 1])
+                master_parts=[n for n, slot in runs if slot != 1], forged=a.forged,
+                bad_parts=bad)
     try:
         line.start()
         print(f"virtual line: camera {a.address}, PLC 127.0.0.1:{line.plc_port}, "
@@ -832,12 +954,24 @@ def main():
         text, worst = table(produced, line)
         print("\n" + text)
         csvs, jsonls, seqs, lines = check_results_files(line.results_dir, parts)
+        sorting = check_sorting(line, parts, lines) if (a.forged or bad) else None
         master_worst = check_masters(line.results_dir, parts, lines) if line.masters else None
         delays = check_plc_status(a.bin_dir, parts, lines, calibrated=bool(cal))
         if delays:
             print(f"PLC scan phase 2 ('part may move'): {min(delays) * 1e3:.1f} to "
                   f"{max(delays) * 1e3:.1f} ms after the last profile, before DONE in every part")
         print(f"\nworst |measured - truth| over all features and parts: {worst:.4f} mm")
+        if sorting:
+            n_bad, n_nok, n_h1, wrong = sorting
+            if wrong:
+                print(f"sorting: {len(wrong)} verdicts differ from the truth's (WRONG above); "
+                      f"{n_bad} bad parts, {n_nok} NOK features read by the PLC")
+            else:
+                print(f"sorting: {n_bad} bad parts, {n_nok} NOK features read by the PLC, each on "
+                      f"a feature out of tolerance by the truth, every other feature OK"
+                      + (f" but Height 1 not measured on {n_h1} parts (no flat part on the bore "
+                         "step: those parts read NOT_MEASURED unless a feature is NOK)"
+                         if n_h1 else ""))
         if cal:
             found, missing, total, before = measure_archived(line, produced, NOMINAL)
             print(f"commissioning: the archived recordings measured again with the nominal "
@@ -862,9 +996,12 @@ def main():
             report_check.check_daemon_report(line.results_dir)
         check_notifications(line.notify)
         assert all(p["state"] == DONE for p in parts), "a part was not measured"
+        assert not (sorting and sorting[3]), \
+            f"{len(sorting[3])} PLC verdicts differ from the truth's (WRONG: under 'sorting')"
         if a.check_mm is not None:
             assert worst <= a.check_mm, f"worst error {worst:.4f} mm > {a.check_mm} mm"
-            assert all(p["verdict"] == "OK" for p in produced), [p["verdict"] for p in produced]
+            if not sorting:  # else check_sorting checked every verdict against the truth
+                assert all(p["verdict"] == "OK" for p in produced), [p["verdict"] for p in produced]
             if master_worst is not None:
                 assert master_worst <= a.check_mm, f"master deviation {master_worst:.4f} mm"
         ok = True

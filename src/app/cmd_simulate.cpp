@@ -1,6 +1,7 @@
 // hotgauge simulate: one simulated part into a recording plus its ground truth.
 #include <spdlog/spdlog.h>
 
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -40,7 +41,8 @@ struct SimulateArgs {
     std::optional<double> noise_mm, spike_fraction, dropout_fraction, max_tilt_deg;
     std::optional<double> yaw_deg;
     std::vector<double> offset_mm;
-    std::vector<std::string> bad;  // "NAME=DELTA" (mm)
+    std::vector<std::string> bad;       // "NAME=DELTA" (mm)
+    std::vector<std::string> bad_part;  // serve: "N:NAME=DELTA", conveyor part N's bad feature
     // --serve: the virtual cell instead of a recording.
     bool serve = false;
     vcell::VirtualCellConfig vc;
@@ -73,6 +75,27 @@ core::Result<std::map<std::string, double>> parse_bad(const std::vector<std::str
             return core::make_error("simulate --bad '" + b +
                                     "': expected NAME=DELTA in mm, e.g. \"Diameter 3=+0.7\"");
         out[name] = delta;
+    }
+    return out;
+}
+
+// --bad-part "N:NAME=DELTA": conveyor part N's bad features (e.g. "4:Diameter 3=+0.7").
+core::Result<std::map<int, std::map<std::string, double>>> parse_bad_parts(
+    const std::vector<std::string>& bad_part) {
+    std::map<int, std::map<std::string, double>> out;
+    for (const auto& b : bad_part) {
+        const auto colon = b.find(':');
+        int n = 0;
+        const char* end = b.data() + (colon == std::string::npos ? 0 : colon);
+        const auto [ptr, ec] = std::from_chars(b.data(), end, n);
+        if (colon == std::string::npos || ec != std::errc() || ptr != end || n < 1)
+            return core::make_error("simulate --bad-part '" + b +
+                                    "': expected N:NAME=DELTA with part N >= 1, e.g. "
+                                    "\"4:Diameter 3=+0.7\"");
+        auto bad = parse_bad({b.substr(colon + 1)});
+        if (!bad)
+            return core::make_error("simulate --bad-part '" + b + "': " + bad.error().message);
+        for (const auto& [name, delta] : *bad) out[n][name] += delta;
     }
     return out;
 }
@@ -132,13 +155,19 @@ int write_sensor_views(const SimulateArgs& a, const sim::CellConfig& cell) {
 
 // Serves the virtual cell until SIGINT/SIGTERM (or --seconds), then prints what it sent.
 int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cell,
-          const sim::SimOptions& opt) {
+          const sim::SimOptions& opt, std::map<int, std::map<std::string, double>> bad_parts) {
     a.vc.recipe = recipe;
     a.vc.cell = cell;
     a.vc.part = opt;
+    a.vc.bad_parts = std::move(bad_parts);
     a.vc.master = opt;  // a cold master: one physical part, below the pyrometer's span
     a.vc.master.seed = a.master_seed;
     a.vc.master.temperature_c = 20.0;
+    // The master is a machined reference with the drawing's idealised shape (sharp, vertical, one
+    // axis), so that every feature has a certified value (a forging's Height 1 may have no flat
+    // part to measure); never bad. docs/virtual-cell.md "The master".
+    a.vc.master.forged = false;
+    a.vc.master.bad_mm.clear();
     a.vc.line_period_s = 1.0 / a.line_rate_hz;
     if (!a.pyrometer_device.empty()) {
         plc::SerialConfig serial;  // 9600 8N1, slave 1: the defaults
@@ -252,6 +281,15 @@ int run(const SimulateArgs& a) {
         return 2;
     }
     opt.bad_mm = std::move(*bad);
+    auto bad_parts = parse_bad_parts(a.bad_part);
+    if (!bad_parts) {
+        spdlog::error("{}", bad_parts.error().message);
+        return 2;
+    }
+    if (!a.serve && !bad_parts->empty()) {
+        spdlog::error("simulate: --bad-part is for the virtual cell's conveyor (--serve)");
+        return 2;
+    }
     if (!a.in_force.empty()) {
         auto in_force = calib::read_calibration(a.in_force);
         if (!in_force) {
@@ -275,7 +313,7 @@ int run(const SimulateArgs& a) {
             "serves parts");
         return 2;
     }
-    if (a.serve) return serve(a, *recipe, c, opt);
+    if (a.serve) return serve(a, *recipe, c, opt, std::move(*bad_parts));
     if (a.out.empty()) {
         spdlog::error("simulate: --out is required (or --serve)");
         return 2;
@@ -401,6 +439,9 @@ Command add_simulate(CLI::App& app) {
                   "serve: write each loaded part's ground truth to DIR/part-NNNN");
     s->add_option("--master-part", a->vc.master_parts,
                   "serve: conveyor part N is the cold master (20 °C, --master-seed); repeatable");
+    s->add_option("--bad-part", a->bad_part,
+                  "serve: conveyor part N is bad: \"N:NAME=DELTA\" as --bad, for part N alone "
+                  "(repeatable)");
     s->add_option("--master-seed", a->master_seed, "serve: the cold master's seed")
         ->capture_default_str();
     s->add_option("--pyrometer-device", a->pyrometer_device,

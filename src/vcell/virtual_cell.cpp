@@ -83,8 +83,11 @@ sim::SimOptions part_options(const sim::SimOptions& base, int n) {
 }
 
 sim::SimOptions conveyor_options(const VirtualCellConfig& c, int n) {
-    if (!c.master_parts.contains(n)) return part_options(c.part, n);
-    return c.master;
+    if (c.master_parts.contains(n)) return c.master;
+    sim::SimOptions o = part_options(c.part, n);
+    if (const auto it = c.bad_parts.find(n); it != c.bad_parts.end())
+        for (const auto& [name, delta] : it->second) o.bad_mm[name] += delta;
+    return o;
 }
 
 struct VirtualCell::Impl {
@@ -383,6 +386,19 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
     if (!(c.cell.accel.rate_hz > 0))
         return core::make_error("virtual cell: accelerometer rate must be > 0");
 
+    // A bad part that cannot be built (an unknown feature, a die shift on a sharp part) is an
+    // error now, not a load that times out later.
+    for (const auto& [n, bad] : c.bad_parts) {
+        if (c.replay) break;  // no part is simulated
+        if (n < 1) return core::make_error("virtual cell: bad part " + std::to_string(n) + " < 1");
+        if (c.master_parts.contains(n))
+            return core::make_error("virtual cell: part " + std::to_string(n) +
+                                    " is the master, which is never bad");
+        std::mt19937_64 check_rng;
+        if (auto part = build_part(c, n, check_rng); !part)
+            return core::make_error("virtual cell: bad part " + std::to_string(n) + ": " +
+                                    part.error().message);
+    }
     std::mt19937_64 rng;
     if (c.replay) {
         auto player = make_player(c);

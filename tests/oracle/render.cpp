@@ -3,11 +3,17 @@
 // recording of format hotgauge-recording/1, and writes the truth beside it.
 //
 // Written from the recording format document (recording-format-v1.md), the part document
-// (hub-a.md) and the recipe alone: it shares no code, header or library with src/.
+// (hub-a.md) and the recipe: the ray casting (Embree), the sensor model and the writers are its
+// own. The ideal part (sharp corners, vertical walls, one axis) comes from its own reading of the
+// recipe. `--forged` renders the part as it leaves the press (hub-a.md "As forged"): its drawing
+// rules are ours (core::build_forged, the shape drawn as docs/simulator.md "As-forged parts"
+// says), so that the truth's sharp-corner features mean what the simulator's mean; what stays
+// independent is how the surface is turned into points.
 //
 //   hotgauge_oracle_render --recipe hub-a.yaml --out DIR [--geometry ours|downDEG]
 //       [--temperature C] [--x MM] [--y MM] [--yaw-deg D] [--phase F] [--noise SIGMA_MM]
 //       [--dropout P] [--seed S] [--part-id ID] [--threads N] [--segments N]
+//       [--forged [--dimension-sigma MM] [--bad "NAME=DELTA"]...]
 //
 // Output: DIR/part/ (the recording), DIR/part_pose.yaml (world_from_part), DIR/truth.json.
 #include <embree3/rtcore.h>
@@ -30,12 +36,16 @@
 #include <iostream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
+
+#include "hotgauge/core/forged.hpp"
+#include "hotgauge/io/recipe.hpp"
 
 namespace {
 
@@ -83,6 +93,10 @@ struct Options {
     std::uint64_t seed = 1;
     int threads = 0;
     int segments = 4096;
+    // As forged: drafts, fillets, die shift and dimensions drawn from the seed (draw_forged).
+    bool forged = false;
+    double dimension_sigma = 0.05;                    // mm, N(0, σ) on every level and diameter
+    std::vector<std::pair<std::string, double>> bad;  // feature name -> mm added to its value
 };
 
 [[noreturn]] void usage(const std::string& why) {
@@ -90,7 +104,7 @@ struct Options {
               << "usage: hotgauge_oracle_render --recipe FILE --out DIR [--geometry ours|downDEG]\n"
                  "  [--temperature C] [--x MM] [--y MM] [--yaw-deg D] [--phase F]\n"
                  "  [--noise SIGMA_MM] [--dropout P] [--seed S] [--part-id ID] [--threads N]\n"
-                 "  [--segments N]\n";
+                 "  [--segments N] [--forged [--dimension-sigma MM] [--bad \"NAME=DELTA\"]...]\n";
     std::exit(2);
 }
 
@@ -110,6 +124,10 @@ Options parse(int argc, char** argv) {
     for (int i = 1; i < argc; ++i) {
         const std::string key = argv[i];
         if (key == "-h" || key == "--help") usage("help");
+        if (key == "--forged") {
+            o.forged = true;
+            continue;
+        }
         if (i + 1 >= argc) usage(key + " needs a value");
         const std::string v = argv[++i];
         if (key == "--recipe") {
@@ -144,6 +162,12 @@ Options parse(int argc, char** argv) {
             o.threads = static_cast<int>(to_double(key, v));
         } else if (key == "--segments") {
             o.segments = static_cast<int>(to_double(key, v));
+        } else if (key == "--dimension-sigma") {
+            o.dimension_sigma = to_double(key, v);
+        } else if (key == "--bad") {
+            const auto eq = v.rfind('=');
+            if (eq == std::string::npos || eq == 0) usage("--bad: expected NAME=DELTA, got " + v);
+            o.bad.emplace_back(v.substr(0, eq), to_double(key, v.substr(eq + 1)));
         } else {
             usage("unknown option " + key);
         }
@@ -157,6 +181,9 @@ Options parse(int argc, char** argv) {
     if (!(o.phase >= 0.0 && o.phase < 1.0)) usage("--phase must be in [0, 1)");
     if (o.noise < 0.0 || o.dropout < 0.0 || o.dropout >= 1.0) usage("bad --noise / --dropout");
     if (o.segments < 16) usage("--segments must be >= 16");
+    if (!o.forged && (!o.bad.empty() || o.dimension_sigma != 0.05))
+        usage("--bad and --dimension-sigma need --forged");
+    if (o.dimension_sigma < 0.0) usage("--dimension-sigma must be >= 0");
     if (o.threads <= 0)
         o.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     return o;
@@ -276,6 +303,102 @@ std::vector<Eigen::Vector2d> outline(const Recipe& rc) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// As forged (--forged): the shape drawn as docs/simulator.md "As-forged parts" says, from the
+// oracle's own stream (the seed salted); core::build_forged makes its (r, z) profiles and the
+// features at the theoretical sharp corners.
+
+namespace core = hotgauge::core;
+
+struct Forged {
+    core::Recipe recipe;
+    core::ForgedPart part;
+    std::map<std::string, double> bad_mm;
+    std::string die_shift_name;  // the recipe's die_shift feature, or "Die shift"
+};
+
+// Uniform in [1, max] (a draft in degrees, a fillet in mm; [max, max] below 1; 0 for none).
+double within_drawing(double max, std::mt19937_64& rng) {
+    if (max <= 0.0) return 0.0;
+    return std::uniform_real_distribution<double>(std::min(1.0, max), max)(rng);
+}
+
+// Every flat face keeps at least min(its width without draft, max(0.3 mm, a fifth of it)).
+bool faces_kept(const core::ForgedPart& undrafted, const core::ForgedPart& part) {
+    const auto& w0 = undrafted.level_faces_mm;
+    const auto& w = part.level_faces_mm;
+    if (w0.size() != w.size()) return false;
+    for (std::size_t i = 0; i < w.size(); ++i) {
+        const double width0 = std::abs(w0[i].second);
+        const double width = w0[i].second < 0 ? -w[i].second : w[i].second;
+        if (width < std::min(width0, std::max(0.3, 0.2 * width0))) return false;
+    }
+    return true;
+}
+
+core::ForgedPart build(const core::Recipe& rc, const core::ForgedShape& shape) {
+    auto part = core::build_forged(rc, shape);
+    if (!part) throw std::runtime_error(part.error().message);
+    return std::move(*part);
+}
+
+// Dimensions N(0, σ) (the origin level stays), the bad features, per wall a draft in [1°, the
+// drawing's] (drawn again until the flat faces are kept), per corner a fillet in [1 mm, the
+// drawing's], the die shift uniform in [0, 0.8 × the drawing's] at a random azimuth.
+Forged draw_forged(const Options& o, double scale) {
+    auto recipe = hotgauge::io::read_recipe(o.recipe);
+    if (!recipe) throw std::runtime_error(recipe.error().message);
+    Forged f{std::move(*recipe), {}, {}, "Die shift"};
+    const core::Recipe& rc = f.recipe;
+    if (!rc.forging) throw std::runtime_error(o.recipe + ": --forged needs a 'forging' drawing");
+    for (const auto& ft : rc.features)
+        if (ft.kind == core::FeatureKind::kDieShift) f.die_shift_name = ft.name;
+    std::seed_seq seq{static_cast<std::uint32_t>(o.seed), static_cast<std::uint32_t>(o.seed >> 32),
+                      0x666f7267u};
+    std::mt19937_64 rng(seq);
+    std::normal_distribution<double> gauss(0.0, 1.0);
+    std::uniform_real_distribution<double> u01(0.0, 1.0);
+    core::ForgedShape shape;
+    shape.scale = scale;
+    for (const auto& [name, z] : rc.levels_mm)
+        shape.levels_mm[name] = z == 0.0 ? 0.0 : z + o.dimension_sigma * gauss(rng);
+    for (const auto* list : {&rc.outer, &rc.inner})
+        for (const auto& s : *list)
+            shape.diameters_mm[s.name] = s.diameter_mm + o.dimension_sigma * gauss(rng);
+    double shift_bad = 0.0;
+    for (const auto& [name, delta] : o.bad) {
+        f.bad_mm[name] += delta;
+        if (name == f.die_shift_name) {
+            shift_bad += delta;
+            continue;
+        }
+        const auto ft = std::find_if(rc.features.begin(), rc.features.end(),
+                                     [&](const core::FeatureSpec& s) { return s.name == name; });
+        if (ft == rc.features.end()) throw std::runtime_error("--bad: no feature '" + name + "'");
+        if (ft->kind == core::FeatureKind::kDiameter) {
+            shape.diameters_mm.at(ft->section) += delta;
+        } else {  // a height: its upper level moves
+            const bool to_upper =
+                rc.level(ft->to_level).value_or(0) >= rc.level(ft->from_level).value_or(0);
+            shape.levels_mm.at(to_upper ? ft->to_level : ft->from_level) += delta;
+        }
+    }
+    const core::ForgedPart undrafted = build(rc, shape);
+    for (int attempt = 0;; ++attempt) {
+        if (attempt == 1000) throw std::runtime_error("no drafts keep the flat faces");
+        for (const auto& w : core::forged_walls(rc))
+            shape.draft_deg[w.name] = within_drawing(rc.draft_of(w.section), rng);
+        if (faces_kept(undrafted, build(rc, shape))) break;
+    }
+    for (const auto& c : core::forged_corners(rc))
+        shape.fillet_mm[c.name] = within_drawing(rc.fillet_at(c.level), rng);
+    const double shift = std::max(0.0, 0.8 * rc.forging->die_shift_mm * u01(rng) + shift_bad);
+    const double azimuth = 2.0 * kPi * u01(rng);
+    shape.die_shift_mm = shift * Eigen::Vector2d(std::cos(azimuth), std::sin(azimuth));
+    f.part = build(rc, shape);
+    return f;
+}
+
+// ---------------------------------------------------------------------------------------------
 // Scene: the hot part (revolved outline, world coordinates) and the support plate.
 
 struct Mesh {
@@ -283,8 +406,18 @@ struct Mesh {
     std::vector<std::array<unsigned, 3>> triangles;
 };
 
+// The surface of revolution of the closed (r, z) outline `ol` (counter-clockwise: material on
+// the left) about the axis through (axis_mm.x, axis_mm.y) of the part frame (hot mm).
 Mesh part_mesh(const std::vector<Eigen::Vector2d>& ol, int segments, double scale,
-               const Matrix4d& world_from_part) {
+               const Matrix4d& world_from_part,
+               const Eigen::Vector2d& axis_mm = Eigen::Vector2d::Zero()) {
+    double area2 = 0;  // twice the signed area: > 0 when counter-clockwise
+    for (std::size_t j = 0; j < ol.size(); ++j) {
+        const auto& a = ol[j];
+        const auto& b = ol[(j + 1) % ol.size()];
+        area2 += a.x() * b.y() - b.x() * a.y();
+    }
+    if (!(area2 > 0)) throw std::logic_error("part_mesh: the outline is not counter-clockwise");
     Mesh m;
     const std::size_t M = ol.size();
     const auto N = static_cast<std::size_t>(segments);
@@ -294,8 +427,8 @@ Mesh part_mesh(const std::vector<Eigen::Vector2d>& ol, int segments, double scal
     for (std::size_t j = 0; j < M; ++j) {
         for (std::size_t k = 0; k < N; ++k) {
             const double a = 2.0 * kPi * static_cast<double>(k) / static_cast<double>(N);
-            const Vector3d p(scale * ol[j].x() * std::cos(a), scale * ol[j].x() * std::sin(a),
-                             scale * ol[j].y());
+            const Vector3d p(axis_mm.x() + scale * ol[j].x() * std::cos(a),
+                             axis_mm.y() + scale * ol[j].x() * std::sin(a), scale * ol[j].y());
             m.vertices.push_back(R * p + t);
         }
     }
@@ -418,9 +551,40 @@ struct Tri {
     Vector3d a, e1, e2, n;  // n: unit normal
 };
 
+// Embree tests rays against triangles in single precision: on a seam (a bore's wall meeting a
+// parting-plane cap), it may report a triangle that the exact ray passes µm beside (seen: 4 µm on
+// a forged part). The context's filter takes a candidate hit only where the double-precision ray
+// (Möller–Trumbore) meets the double-precision triangle, so traversal goes on to the true one.
+struct ExactContext {
+    RTCIntersectContext ctx;  // first: Embree passes &ctx to the filter
+    const std::vector<std::vector<Tri>>* tris = nullptr;
+    const std::vector<Vector3d>* dir_world = nullptr;  // by ray id
+    Vector3d origin = Vector3d::Zero();
+};
+
+void exact_filter(const RTCFilterFunctionNArguments* args) {
+    const auto* c = reinterpret_cast<const ExactContext*>(args->context);
+    constexpr double kTol = 1e-9;  // barycentric: a ray through an edge keeps one side
+    for (unsigned i = 0; i < args->N; ++i) {
+        if (args->valid[i] == 0) continue;
+        const Tri& tri = (*c->tris)[RTCHitN_geomID(args->hit, args->N, i)]
+                                   [RTCHitN_primID(args->hit, args->N, i)];
+        const Vector3d& d = (*c->dir_world)[RTCRayN_id(args->ray, args->N, i)];
+        const Vector3d p = d.cross(tri.e2);
+        const double det = tri.e1.dot(p);
+        if (std::abs(det) < 1e-300) continue;  // parallel: leave Embree's answer
+        const Vector3d s = c->origin - tri.a;
+        const double u = s.dot(p) / det;
+        const Vector3d q = s.cross(tri.e1);
+        const double v = d.dot(q) / det;
+        if (u < -kTol || v < -kTol || u + v > 1 + kTol) args->valid[i] = 0;
+    }
+}
+
 // One face: the fan of W rays per profile, the camera stepping along the scan direction.
-void render(Face& face, RTCScene scene, const std::vector<std::vector<Tri>>& tris,
-            unsigned part_geom, const Options& o, std::uint64_t face_seed) {
+// tris: per Embree geometry id, its triangles in double precision.
+void render(Face& face, RTCScene scene, const std::vector<std::vector<Tri>>& tris, const Options& o,
+            std::uint64_t face_seed) {
     const std::size_t n_prof = face.positions.size();
     face.profiles.assign(n_prof * kWidth * 2, std::numeric_limits<float>::quiet_NaN());
     const Matrix3d R = face.camera_to_world.topLeftCorner<3, 3>();
@@ -436,9 +600,12 @@ void render(Face& face, RTCScene scene, const std::vector<std::vector<Tri>>& tri
     std::vector<std::size_t> hits(static_cast<std::size_t>(o.threads), 0);
 
     auto work = [&](int worker) {
-        RTCIntersectContext ctx;
-        rtcInitIntersectContext(&ctx);
-        ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+        ExactContext exact;
+        rtcInitIntersectContext(&exact.ctx);
+        exact.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+        exact.ctx.filter = exact_filter;
+        exact.tris = &tris;
+        exact.dir_world = &dir_world;
         alignas(64) RTCRayHit16 rh{};
         alignas(64) int valid[kPacket];
         std::fill(valid, valid + kPacket, -1);
@@ -461,6 +628,7 @@ void render(Face& face, RTCScene scene, const std::vector<std::vector<Tri>>& tri
                 }
             }
             const Vector3d origin = T + face.positions[k] * face.scan_direction;
+            exact.origin = origin;
             float* row = face.profiles.data() + k * kWidth * 2;
             for (int i0 = 0; i0 < kWidth; i0 += kPacket) {
                 for (int l = 0; l < kPacket; ++l) {
@@ -476,16 +644,16 @@ void render(Face& face, RTCScene scene, const std::vector<std::vector<Tri>>& tri
                     rh.ray.mask[l] = mask;
                     rh.ray.flags[l] = 0;
                     rh.ray.time[l] = 0.0f;
-                    rh.ray.id[l] = 0;
+                    rh.ray.id[l] = static_cast<unsigned>(i0 + l);  // exact_filter's direction
                     rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
                     rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
                 }
-                rtcIntersect16(valid, scene, &ctx, &rh);
+                rtcIntersect16(valid, scene, &exact.ctx, &rh);
                 for (int l = 0; l < kPacket; ++l) {
                     if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) continue;
                     const int i = i0 + l;
                     // Refine in double precision against the exact (double) triangle.
-                    const auto& tri = tris[rh.hit.geomID[l] == part_geom ? 0 : 1][rh.hit.primID[l]];
+                    const auto& tri = tris[rh.hit.geomID[l]][rh.hit.primID[l]];
                     const Vector3d& d = dir_world[i];
                     const Vector3d p = d.cross(tri.e2);
                     const double det = tri.e1.dot(p);
@@ -618,23 +786,45 @@ int run(const Options& o) {
     const Matrix3d Rz = Eigen::AngleAxisd(yaw, Vector3d::UnitZ()).toRotationMatrix();
     const Matrix4d world_from_part = pose(Rz, Vector3d(o.x, o.y, 0));
 
-    // Scene.
-    const auto ol = outline(rc);
+    // Scene: the part's meshes, then the plate; Embree numbers them 0, 1, ... in that order.
+    std::optional<Forged> forged;
+    std::vector<Mesh> meshes;
     double r_max = 0;
-    for (const auto& p : ol) r_max = std::max(r_max, p.x());
-    const Mesh part = part_mesh(ol, o.segments, scale, world_from_part);
-    const Mesh plate = plate_mesh();
+    if (o.forged) {
+        // Two closed solids meeting at the parting plane: where their parting-plane annuli
+        // overlap, the two caps coincide inside the union and no ray reaches them; elsewhere the
+        // uncovered cap is the step the die shift leaves.
+        forged = draw_forged(o, scale);
+        const core::ForgedPart& fp = forged->part;
+        const Eigen::Vector2d shift_hot = scale * fp.shape.die_shift_mm;
+        meshes.push_back(part_mesh(fp.lower, o.segments, scale, world_from_part));
+        meshes.push_back(part_mesh(fp.upper, o.segments, scale, world_from_part, shift_hot));
+        for (const auto& p : fp.lower) r_max = std::max(r_max, p.x());
+        for (const auto& p : fp.upper)
+            r_max = std::max(r_max, p.x() + fp.shape.die_shift_mm.norm());
+    } else {
+        const auto ol = outline(rc);
+        for (const auto& p : ol) r_max = std::max(r_max, p.x());
+        meshes.push_back(part_mesh(ol, o.segments, scale, world_from_part));
+    }
+    const std::size_t n_part_meshes = meshes.size();
+    meshes.push_back(plate_mesh());
     RTCDevice dev = rtcNewDevice(("threads=" + std::to_string(o.threads)).c_str());
     if (!dev) throw std::runtime_error("cannot create the Embree device");
     rtcSetDeviceErrorFunction(dev, embree_error, nullptr);
     RTCScene scene = rtcNewScene(dev);
     rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM);
-    const unsigned part_geom = attach(dev, scene, part, kMaskPart);
-    attach(dev, scene, plate, kMaskPlate);
+    rtcSetSceneFlags(scene, RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
+    std::vector<std::vector<Tri>> tris;
+    std::size_t part_triangles = 0;
+    for (std::size_t i = 0; i < meshes.size(); ++i) {
+        const bool is_part = i < n_part_meshes;
+        if (attach(dev, scene, meshes[i], is_part ? kMaskPart : kMaskPlate) != i)
+            throw std::logic_error("Embree geometry ids are not 0, 1, ...");
+        tris.push_back(triangles(meshes[i]));
+        if (is_part) part_triangles += meshes[i].triangles.size();
+    }
     rtcCommitScene(scene);
-    std::vector<std::vector<Tri>> tris(2);
-    tris[0] = triangles(part);
-    tris[1] = triangles(plate);
     const auto t_scene = std::chrono::steady_clock::now();
 
     // The flange: the outer section with the largest diameter (side sensors aim at its rim).
@@ -669,7 +859,7 @@ int run(const Options& o) {
             face.accel_times.push_back(t);
             for (int c = 0; c < 3; ++c) face.accel.push_back(static_cast<float>(a[c]));
         }
-        render(face, scene, tris, part_geom, o, o.seed * 4 + f);
+        render(face, scene, tris, o, o.seed * 4 + f);
     }
     rtcReleaseScene(scene);
     rtcReleaseDevice(dev);
@@ -724,14 +914,18 @@ int run(const Options& o) {
        << "  \"segments\": " << o.segments << ",\n"
        << "  \"world_from_part\": " << matrix_text(world_from_part) << ",\n"
        << "  \"levels\": {";
+    // Forged: the actual levels and each section's diameter at its sharp corner (the anchor of its
+    // wall's cone); else the recipe's.
     for (std::size_t i = 0; i < rc.levels.size(); ++i)
         js << (i ? ", " : "") << json_string(rc.levels[i].first) << ": "
-           << num(scale * rc.levels[i].second);
+           << num(scale * (forged ? forged->part.shape.levels_mm.at(rc.levels[i].first)
+                                  : rc.levels[i].second));
     js << "},\n  \"radii\": {";
     bool first = true;
     for (const auto* list : {&rc.outer, &rc.inner})
         for (const auto& s : *list) {
-            js << (first ? "" : ", ") << json_string(s.name) << ": " << num(scale * s.diameter / 2);
+            const double d = forged ? forged->part.shape.diameters_mm.at(s.name) : s.diameter;
+            js << (first ? "" : ", ") << json_string(s.name) << ": " << num(scale * d / 2);
             first = false;
         }
     js << "},\n  \"faces\": {";
@@ -740,28 +934,68 @@ int run(const Options& o) {
            << ": {\"camera_to_world\": " << matrix_text(fs[f].camera_to_world)
            << ", \"profiles\": " << fs[f].positions.size() << ", \"points\": " << fs[f].hits
            << ", \"plate\": " << (fs[f].plate ? "true" : "false") << "}";
+    if (forged) {  // the drawn geometry, cold, part frame (docs/simulator.md "As-forged parts")
+        const core::ForgedPart& fp = forged->part;
+        auto map_text = [](const std::map<std::string, double>& m) {
+            std::string t = "{";
+            for (const auto& [k, v] : m)
+                t += (t.size() > 1 ? ", " : "") + json_string(k) + ": " + num(v);
+            return t + "}";
+        };
+        auto profile_text = [](const core::ForgedSolid::Profile& p) {
+            std::string t = "[";
+            for (std::size_t i = 0; i < p.size(); ++i)
+                t += (i ? ", [" : "[") + num(p[i].x()) + ", " + num(p[i].y()) + "]";
+            return t + "]";
+        };
+        js << "},\n  \"forged\": {\"parting_z_mm\": " << num(fp.parting_z_mm)
+           << ", \"die_shift_mm\": [" << num(fp.shape.die_shift_mm.x()) << ", "
+           << num(fp.shape.die_shift_mm.y()) << "], \"bad_mm\": " << map_text(forged->bad_mm)
+           << ",\n    \"draft_deg\": " << map_text(fp.draft_deg)
+           << ",\n    \"fillet_mm\": " << map_text(fp.fillet_mm)
+           << ",\n    \"profile_lower\": " << profile_text(fp.lower)
+           << ",\n    \"profile_upper\": " << profile_text(fp.upper);
+    }
     js << "},\n  \"features\": [\n";
-    for (std::size_t i = 0; i < rc.features.size(); ++i) {
-        const Feature& ft = rc.features[i];
-        // The render is one solid of revolution: one axis, no die shift.
-        const double cold = ft.kind == "diameter" ? rc.section(ft.section).diameter
-                            : ft.kind == "height" ? rc.level(ft.to) - rc.level(ft.from)
-                                                  : 0.0;
-        if (std::abs(cold - ft.nominal) > 1e-9)
-            std::cerr << "warning: " << ft.name << ": geometry gives " << cold << ", nominal_mm "
-                      << ft.nominal << "\n";
+    // Forged: every feature at its theoretical sharp corner and the die shift (core::build_forged),
+    // plus "Die shift" when the recipe has no die_shift feature.
+    std::vector<std::string> rows;
+    for (const Feature& ft : rc.features) {
+        double cold = 0.0;
+        if (forged) {
+            cold = forged->part.feature_cold_mm.at(ft.name);
+        } else {  // one solid of revolution: one axis, no die shift
+            cold = ft.kind == "diameter" ? rc.section(ft.section).diameter
+                   : ft.kind == "height" ? rc.level(ft.to) - rc.level(ft.from)
+                                         : 0.0;
+            if (std::abs(cold - ft.nominal) > 1e-9)
+                std::cerr << "warning: " << ft.name << ": geometry gives " << cold
+                          << ", nominal_mm " << ft.nominal << "\n";
+        }
         std::string faces_list;
         for (std::size_t k = 0; k < ft.faces.size(); ++k)
             faces_list += (k ? ", " : "") + json_string(ft.faces[k]);
-        js << "    {\"name\": " << json_string(ft.name) << ", \"kind\": " << json_string(ft.kind)
-           << ", \"faces\": [" << faces_list << "], \"nominal_cold\": " << num(ft.nominal)
-           << ", \"true_cold\": " << num(cold) << ", \"true_hot\": " << num(scale * cold);
+        std::string row = "    {\"name\": " + json_string(ft.name) +
+                          ", \"kind\": " + json_string(ft.kind) + ", \"faces\": [" + faces_list +
+                          "], \"nominal_cold\": " + num(ft.nominal) +
+                          ", \"true_cold\": " + num(cold) + ", \"true_hot\": " + num(scale * cold);
         if (ft.kind == "diameter")
-            js << ", \"section\": " << json_string(ft.section);
+            row += ", \"section\": " + json_string(ft.section);
         else if (ft.kind == "height")
-            js << ", \"from\": " << json_string(ft.from) << ", \"to\": " << json_string(ft.to);
-        js << "}" << (i + 1 < rc.features.size() ? "," : "") << "\n";
+            row += ", \"from\": " + json_string(ft.from) + ", \"to\": " + json_string(ft.to);
+        rows.push_back(row + "}");
     }
+    if (forged && forged->die_shift_name == "Die shift" &&
+        std::none_of(rc.features.begin(), rc.features.end(),
+                     [](const Feature& ft) { return ft.name == "Die shift"; })) {
+        const double cold = forged->part.shape.die_shift_mm.norm();
+        rows.push_back(
+            "    {\"name\": \"Die shift\", \"kind\": \"die_shift\", \"faces\": [], "
+            "\"nominal_cold\": 0.0, \"true_cold\": " +
+            num(cold) + ", \"true_hot\": " + num(scale * cold) + "}");
+    }
+    for (std::size_t i = 0; i < rows.size(); ++i)
+        js << rows[i] << (i + 1 < rows.size() ? "," : "") << "\n";
     js << "  ]\n}\n";
     write_text(out / "truth.json", js.str());
     const auto t_end = std::chrono::steady_clock::now();
@@ -769,9 +1003,9 @@ int run(const Options& o) {
         return std::chrono::duration<double, std::milli>(b - a).count();
     };
     std::cerr << "rendered " << fs.size() << " faces x " << n_prof << " profiles x " << kWidth
-              << " rays, " << part.triangles.size() << " triangles: " << std::fixed
-              << std::setprecision(0) << ms(t_start, t_scene) << " ms scene, "
-              << ms(t_scene, t_render) << " ms rays, " << ms(t_render, t_end) << " ms write\n";
+              << " rays, " << part_triangles << " triangles: " << std::fixed << std::setprecision(0)
+              << ms(t_start, t_scene) << " ms scene, " << ms(t_scene, t_render) << " ms rays, "
+              << ms(t_render, t_end) << " ms write\n";
     return 0;
 }
 

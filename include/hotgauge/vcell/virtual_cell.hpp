@@ -16,6 +16,7 @@
 #include <atomic>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <optional>
 #include <set>
@@ -77,6 +78,10 @@ struct VirtualCellConfig {
     // (20 °C: below the pyrometer's span, so it reads nothing, as on a real cell).
     std::set<int> master_parts;
     sim::SimOptions master;
+    // Bad conveyor parts (docs/virtual-cell.md "Parts"): part N -> features moved out of
+    // tolerance (name -> mm, as sim::SimOptions::bad_mm), added to `part.bad_mm`. A master part
+    // is never bad.
+    std::map<int, std::map<std::string, double>> bad_parts;
     std::optional<ReplayConfig> replay;  // set: replay it (peaks mode), no part is simulated
 };
 
@@ -86,7 +91,8 @@ struct VirtualCellConfig {
 // 0, +37, +74, −90, −53, −16, +21, +58, +95, −69, −32, +5 for parts 1..12.
 sim::SimOptions part_options(const sim::SimOptions& base, int n);
 
-// What conveyor part n is: the master when n is one of `c.master_parts`, else part_options.
+// What conveyor part n is: the master when n is one of `c.master_parts`, else part_options with
+// the part's `c.bad_parts`.
 sim::SimOptions conveyor_options(const VirtualCellConfig& c, int n);
 
 struct VirtualCellStats {
