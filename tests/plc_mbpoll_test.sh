@@ -72,7 +72,8 @@ import sys, yaml
 recipe, part = yaml.safe_load(open(sys.argv[1])), int(sys.argv[2])
 for f in recipe["features"]:
     s = f["slot"]
-    um = round(f["nominal_mm"] * 1000) + ((part + s) % 5 - 2) * 10
+    lo, hi = (round(x * 1000) for x in f["tolerance_mm"])  # the stand-in stays in tolerance
+    um = round(f["nominal_mm"] * 1000) + min(max(((part + s) % 5 - 2) * 10, lo), hi)
     print(s, um, um / 1000)
 PY
 }

@@ -132,9 +132,12 @@ def features_of(registers, plc):
 
 
 def expected(recipe, part):
-    """The stand-in cell: nominal + ((part + slot) mod 5 - 2) * 10 µm, all OK."""
-    return {f["slot"]: round(f["nominal_mm"] * 1000) + ((part + f["slot"]) % 5 - 2) * 10
-            for f in recipe["features"]}
+    """The stand-in cell: nominal + ((part + slot) mod 5 - 2) * 10 µm held inside the
+    tolerance (a die shift is never below 0), all OK."""
+    def dev(f):
+        lo, hi = (round(x * 1000) for x in f["tolerance_mm"])
+        return min(max(((part + f["slot"]) % 5 - 2) * 10, lo), hi)
+    return {f["slot"]: round(f["nominal_mm"] * 1000) + dev(f) for f in recipe["features"]}
 
 
 def cycle(plc, part, slot=1):

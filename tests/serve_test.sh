@@ -51,7 +51,9 @@ compare() {
 import json, sys, yaml
 a, b = (json.load(open(p)) for p in sys.argv[1:3])
 truth = {f["name"]: f["cold_mm"] for f in yaml.safe_load(open(sys.argv[4]))["features"]}
-top = [f for f in a["features"] if f["faces"] == ["top"]]
+# The top face's features: those it measures first (a forging's outer diameter lists the side
+# scans after it, for its draft when they are there).
+top = [f for f in a["features"] if f["faces"][0] == "top" and f["kind"] == "diameter"]
 assert len(top) >= 3, "the top face measures at least three features"
 live = {f["name"]: f for f in b["features"]}
 worst = 0.0

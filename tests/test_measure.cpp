@@ -15,6 +15,7 @@
 #include "hotgauge/measure/features.hpp"
 #include "hotgauge/measure/fit.hpp"
 #include "hotgauge/sim/simulator.hpp"
+#include "ideal_recipe.hpp"
 
 using namespace hotgauge;
 
@@ -69,24 +70,9 @@ sim::SimResult simulate(const sim::CellConfig& cell, std::uint64_t seed, double 
     return std::move(*s);
 }
 
-// hub-a as the drawing's idealisation, without its forging notes (sharp corners, vertical walls,
-// one axis): the side heights from their side scan alone, the diameters from the face that sees
-// their edge, no die shift. What recipes without a `forging` key measure (docs/recipes.md).
+// hub-a as the drawing's idealisation (tests/ideal_recipe.hpp).
 const core::Recipe& ideal_recipe() {
-    static const core::Recipe r = [] {
-        core::Recipe out = env().recipe;
-        out.forging.reset();
-        std::vector<core::FeatureSpec> kept;
-        for (auto f : out.features) {
-            if (f.kind == core::FeatureKind::kDieShift) continue;
-            if (f.kind == core::FeatureKind::kDiameter ||
-                f.height_method == core::HeightMethod::kEdges)
-                f.faces.resize(1);  // the face that sees the edge; a height's side scan
-            kept.push_back(f);
-        }
-        out.features = kept;
-        return out;
-    }();
+    static const core::Recipe r = test::idealised(env().recipe);
     return r;
 }
 

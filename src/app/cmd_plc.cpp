@@ -78,7 +78,8 @@ struct ServeArgs {
 };
 
 // The stand-in cell's result: every recipe feature at nominal + ((part id + slot) mod 5 − 2)·10 µm
-// (always in tolerance), at 1050.0 °C, unless the part id asks for trouble.
+// held inside its tolerance (a die shift is never below 0), at 1050.0 °C, unless the part id asks
+// for trouble.
 plc::PartResult demo_result(const core::Recipe& recipe, std::uint32_t part_id,
                             std::uint16_t recipe_revision) {
     plc::PartResult r;
@@ -90,7 +91,7 @@ plc::PartResult demo_result(const core::Recipe& recipe, std::uint32_t part_id,
         v.slot = f.slot;
         const auto dev_um =
             static_cast<int>((std::uint64_t{part_id} + static_cast<unsigned>(f.slot)) % 5) - 2;
-        double value = f.nominal_mm + dev_um * 0.010;
+        double value = f.nominal_mm + std::clamp(dev_um * 0.010, f.tol_lower_mm, f.tol_upper_mm);
         if ((part_id == kNokPart && f.slot == 1) || (part_id == kDegradedPart && f.slot == 4))
             value = f.nominal_mm + 1.0;
         if (part_id != kNotMeasuredPart || f.slot != 3) v.value_mm = value;

@@ -323,4 +323,21 @@ ForgedSolid ForgedPart::solid() const {
     return ForgedSolid(scaled(lower), scaled(upper), k * parting_z_mm, k * shape.die_shift_mm);
 }
 
+double draw_within(double max, std::mt19937_64& rng) {
+    if (max <= 0.0) return 0.0;
+    return std::uniform_real_distribution<double>(std::min(1.0, max), max)(rng);
+}
+
+bool flat_faces_kept(const ForgedPart& undrafted, const ForgedPart& part) {
+    const auto& w0 = undrafted.level_faces_mm;
+    const auto& w = part.level_faces_mm;
+    if (w0.size() != w.size()) return false;
+    for (std::size_t i = 0; i < w.size(); ++i) {
+        const double width0 = std::abs(w0[i].second);
+        const double width = w0[i].second < 0 ? -w[i].second : w[i].second;
+        if (width < std::min(width0, std::max(0.3, 0.2 * width0))) return false;
+    }
+    return true;
+}
+
 }  // namespace hotgauge::core

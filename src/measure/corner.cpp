@@ -22,47 +22,83 @@ Vec5 to(const CornerModel& m) {
     return x;
 }
 
-// Residual and its gradient with respect to (cx, cy, radius, t, rho).
+// The distance from (s, h) to the profile along its normal: its value, the normal n (its gradient
+// in (s, h)), its derivatives in t and rho at fixed (s, h), and the part of the profile nearest.
+struct Ortho {
+    double e = 0;
+    Eigen::Vector2d n = Eigen::Vector2d::UnitY();
+    double de_dt = 0, de_drho = 0;
+    int where = 0;  // 0 plane, 1 fillet, 2 wall
+};
+Ortho ortho(const CornerModel& m, double s, double h) {
+    const double k = std::sqrt(1.0 + m.t * m.t);
+    // Fillet centre (s_c, h_c): rho from the plane and from the wall, inside the material.
+    const Eigen::Vector2d c(-m.rho * k + m.t * m.rho, -m.rho);
+    const Eigen::Vector2d n2(1.0 / k, m.t / k);     // wall normal, out of the material
+    const Eigen::Vector2d down(m.t / k, -1.0 / k);  // along the wall, away from the plane
+    const Eigen::Vector2d ps(s, h);
+    Ortho o;
+    if (s <= c.x()) {
+        o.e = h;
+    } else if ((ps - (c + m.rho * n2)).dot(down) >= 0.0) {
+        o.where = 2;
+        o.e = (s + m.t * h) / k;
+        o.n = n2;
+        o.de_dt = h / k - (s + m.t * h) * m.t / (k * k * k);
+    } else {
+        o.where = 1;
+        const Eigen::Vector2d dv = ps - c;
+        const double D = std::max(dv.norm(), 1e-12);
+        o.e = D - m.rho;
+        o.n = dv / D;
+        o.de_dt = -o.n.x() * m.rho * (1.0 - m.t / k);
+        o.de_drho = -o.n.x() * (m.t - k) + o.n.y() - 1.0;
+    }
+    return o;
+}
+
+// Residual and its gradient with respect to (cx, cy, radius, t, rho). With the sample's ray, the
+// residual is the distance along the ray to the profile: the range noise lies along the ray, and
+// an orthogonal fit of a fillet seen along the axis, whose steep part turns that noise
+// sideways, read the corner 5-8 µm small at σ 0.05 mm (a 2-D model: −7.7 µm orthogonal, −0.2 µm
+// along the ray; the same samples with the noise along the normal +1.1 µm). Grazing rays (the
+// ray within 12° of the profile) keep the orthogonal distance.
 double residual(const CornerModel& m, double side, const CornerPoint& p, Vec5* grad, int* part) {
     const Eigen::Vector2d d = p.q - m.centre;
     const double r = std::max(d.norm(), 1e-9);
     const double s = side * (r - m.radius), h = p.h;
-    const double k = std::sqrt(1.0 + m.t * m.t);
     // ds/d(cx, cy, radius); s does not depend on t or rho.
     const Eigen::Vector2d ds_dc = -side * d / r;
     const double ds_dr0 = -side;
-    // Fillet centre (s_c, h_c): rho from the plane and from the wall, inside the material.
-    const double s_c = -m.rho * k + m.t * m.rho, h_c = -m.rho;
-    const Eigen::Vector2d n2(1.0 / k, m.t / k);     // wall normal, out of the material
-    const Eigen::Vector2d down(m.t / k, -1.0 / k);  // along the wall, away from the plane
-    const Eigen::Vector2d c(s_c, h_c), T2 = c + m.rho * n2;
-    const Eigen::Vector2d ps(s, h);
-    int where = 1;
-    if (s <= s_c)
-        where = 0;
-    else if ((ps - T2).dot(down) >= 0.0)
-        where = 2;
-    if (part) *part = where;
-    Vec5 g = Vec5::Zero();
-    double e = 0;
-    if (where == 0) {
-        e = h;
-    } else if (where == 2) {
-        e = (s + m.t * h) / k;
-        g.head<2>() = ds_dc / k;
-        g[2] = ds_dr0 / k;
-        g[3] = h / k - (s + m.t * h) * m.t / (k * k * k);
-    } else {
-        const Eigen::Vector2d dv = ps - c;
-        const double D = std::max(dv.norm(), 1e-12);
-        const double es = dv.x() / D, eh = dv.y() / D;
-        e = D - m.rho;
-        g.head<2>() = es * ds_dc;
-        g[2] = es * ds_dr0;
-        g[3] = -es * m.rho * (1.0 - m.t / k);
-        g[4] = -es * (m.t - k) + eh - 1.0;
+    Ortho o = ortho(m, s, h);
+    double e = o.e, scale = 1.0;
+    if (p.ray.squaredNorm() > 0.0) {
+        const Eigen::Vector2d ray(side * p.ray.x(), p.ray.y());  // (s, h), towards the sensor
+        double lambda = 0;
+        Ortho at = o;
+        bool ok = true;
+        for (int it = 0; it < 6 && ok; ++it) {
+            const double nd = at.n.dot(ray);
+            ok = std::abs(nd) >= 0.2;
+            if (!ok) break;
+            lambda -= at.e / nd;
+            at = ortho(m, s + lambda * ray.x(), h + lambda * ray.y());
+            if (std::abs(at.e) < 1e-9) break;
+        }
+        if (ok && std::abs(at.n.dot(ray)) >= 0.2 && std::abs(at.e) < 1e-6) {
+            o = at;
+            e = -lambda;
+            scale = 1.0 / at.n.dot(ray);
+        }
     }
-    if (grad) *grad = g;
+    if (part) *part = o.where;
+    if (grad) {
+        Vec5& g = *grad;
+        g.head<2>() = scale * o.n.x() * ds_dc;
+        g[2] = scale * o.n.x() * ds_dr0;
+        g[3] = scale * o.de_dt;
+        g[4] = scale * o.de_drho;
+    }
     return e;
 }
 

@@ -32,10 +32,13 @@ struct EdgePlane {
 };
 
 // A sample in the level plane's frame: q its in-plane coordinates, h its height above the plane
-// (positive out of the material, towards the sensor that sees the plane).
+// (positive out of the material, towards the sensor that sees the plane), and its ray towards the
+// sensor: (component away from the axis, component along h); (0, 0): unknown, the residual is
+// the distance along the profile's normal.
 struct CornerPoint {
     Eigen::Vector2d q;
     double h;
+    Eigen::Vector2d ray = Eigen::Vector2d::Zero();
 };
 
 // The corner's profile in the half-plane (s, h) about `centre`: s = side·(r − radius) is how far

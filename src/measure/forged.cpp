@@ -64,7 +64,14 @@ std::vector<CornerPoint> corner_points(const std::vector<const FaceFrame*>& fram
             if (h < -depth || h > kAbove) return;
             const Eigen::Vector2d q = ep.to2d(p);
             const double s = side * ((q - c).norm() - R);
-            if (s >= -s_in && s <= s_out) out.push_back({q, h});
+            if (s < -s_in || s > s_out) return;
+            // The ray towards the sensor: its part away from the axis, and along h.
+            const Eigen::Vector3d ray = -fr->ray_dir(n.q % fr->w).normalized();
+            const Eigen::Vector2d radial = (q - c).norm() > 1e-9
+                                               ? Eigen::Vector2d((q - c).normalized())
+                                               : Eigen::Vector2d::UnitX();
+            const Eigen::Vector2d in_plane(ray.dot(ep.e1), ray.dot(ep.e2));
+            out.push_back({q, h, {in_plane.dot(radial), ray.dot(ep.plane.normal)}});
         });
     return out;
 }
@@ -250,9 +257,21 @@ void measure_die_shift(const Context& ctx, const std::vector<FeatureResult>& mea
         shift.norm() > 1e-9 ? Eigen::Vector2d(shift / shift.norm()) : Eigen::Vector2d(1.0, 0.0);
     r.u_budget = {{"centres", std::sqrt(dir.x() * dir.x() * u2.x() + dir.y() * dir.y() * u2.y())}};
     r.n_points = 0;
+    std::string degraded;  // a circle the data cannot vouch for: neither can the die shift
     for (const auto& f : measured)
-        if (f.kind == core::FeatureKind::kDiameter && f.hot_mm && f.centre_mm)
+        if (f.kind == core::FeatureKind::kDiameter && f.hot_mm && f.centre_mm) {
             r.n_points += f.n_points;
+            if (!f.degraded && f.left_out.empty()) continue;  // a centre moved by a hole too
+            degraded += (degraded.empty() ? "" : ", ") + f.name;
+            for (const auto& run : f.left_out)
+                if (std::find(r.left_out.begin(), r.left_out.end(), run) == r.left_out.end())
+                    r.left_out.push_back(run);
+        }
+    if (!degraded.empty()) {
+        r.degraded = true;
+        r.degraded_because =
+            "from circles measured with or around untrusted profiles (" + degraded + ")";
+    }
     r.method = "circle centres";
     add_sector_term(r);
 }

@@ -23,6 +23,7 @@ constexpr double kMaxRimGapMm = 0.5;
 struct LevelEnd {
     EdgeEstimate est;
     std::optional<PlaneFit> plane;                  // plane-derived ends
+    std::vector<Eigen::Vector3d> plane_points;      // ... a convex corner's: the plane's inliers
     Eigen::Vector3d ref = Eigen::Vector3d::Zero();  // the end's point (on the plane at the wall)
     std::vector<double> angles;                     // silhouette: azimuth of each bracket
     std::vector<Interval> intervals;                // silhouette: each bracket's z interval
@@ -129,6 +130,7 @@ std::optional<LevelEnd> corner_end(const Context& ctx, const std::string& level,
     }
     LevelEnd e;
     e.plane = pl.fit;
+    e.plane_points = pl.points;
     e.ref = on_plane_at(pl.fit, w.radius.mean, w.phi);
     e.u_fit = plane_u_at(pl, e.ref);
     e.est = {level, "convex corner", {}, e.ref.z(), e.u_fit, pl.fit.n_points};
@@ -272,7 +274,15 @@ std::optional<LevelEnd> level_end(const Context& ctx, const std::string& level,
         why = "no outer wall ends at level '" + level + "'";
         return std::nullopt;
     }
-    const auto w = fit_wall(ctx, frames, *wall, level, why);
+    auto w = fit_wall(ctx, frames, *wall, level, why);
+    if (!w && ctx.recipe.forging) {
+        // A forging's end is its level's fitted face: the wall only places the point the height
+        // is taken at, and a wall out of view (under the flange) is placed at its nominal.
+        w = WallFit{};
+        w->radius.mean = ctx.ex.z(wall->value);
+        w->thr = ctx.ex.tol(ctx.c.wall_band_mm, wall->value);
+        why.clear();
+    }
     if (!w) return std::nullopt;
     if (ctx.recipe.forging) return forged_end(ctx, level, L, *wall, *w, frames, why);
     std::string why_corner, why_support;
@@ -291,12 +301,23 @@ std::optional<LevelEnd> level_end(const Context& ctx, const std::string& level,
 // The height between two ends: from the better-supported plane when an end has one (the other
 // end's point, at the same side of the part, so a small tilt of the pose cancels), else along
 // the axis between two edges.
+// Two planes from different faces (a forging's flange top from the top scan, its underside from
+// the bottom scan): along the axis, where neither plane's tilt error has a lever arm (at the
+// flange rim, 69 mm out, a compensation residual's 0.5 mrad tilt of one face's plane read a
+// height 0.035 mm off).
 double height_between(const LevelEnd& a, const LevelEnd& b) {
     const LevelEnd* ref = nullptr;
     if (a.plane && (!b.plane || a.plane->n_points >= b.plane->n_points)) ref = &a;
     if (b.plane && !ref) ref = &b;
     if (!ref) return std::abs(b.ref.z() - a.ref.z());
     const LevelEnd& other = ref == &a ? b : a;
+    if (other.plane && other.est.faces != ref->est.faces) {
+        const PlaneFit& o = *other.plane;
+        const Eigen::Vector3d on_axis(
+            0.0, 0.0,
+            o.point.z() + (o.normal.x() * o.point.x() + o.normal.y() * o.point.y()) / o.normal.z());
+        return std::abs(ref->plane->distance(on_axis));
+    }
     return std::abs(ref->plane->distance(other.ref));
 }
 
@@ -331,6 +352,8 @@ void edge_sectors(const Context& ctx, const LevelEnd (&e)[2], FeatureResult& r) 
     if (const auto tau = between_std(hs, us)) r.sector_between_mm = *tau;
 }
 
+void plane_sectors(const Context& ctx, const PlaneResult (&pl)[2], FeatureResult& r);
+
 void height_edges(const Context& ctx, const core::FeatureSpec& f,
                   const std::vector<const FaceFrame*>& frames, FeatureResult& r) {
     LevelEnd e[2];
@@ -352,6 +375,17 @@ void height_edges(const Context& ctx, const core::FeatureSpec& f,
         if (end.plane) r.fit_rms_mm = std::max(r.fit_rms_mm, end.plane->rms_mm);
     }
     if (planes == 0) edge_sectors(ctx, e, r);
+    // Two fitted faces (a forging's ends): what varies around the part shows in the height of
+    // each sector both are seen in, as for `method: planes` (two faces' planes: their relative
+    // tilt and registration, which the planes' own fits do not see).
+    if (!e[0].plane_points.empty() && !e[1].plane_points.empty()) {
+        PlaneResult pl[2];
+        for (int j = 0; j < 2; ++j) {
+            pl[j].fit = *e[j].plane;
+            pl[j].points = e[j].plane_points;
+        }
+        plane_sectors(ctx, pl, r);
+    }
     add_sector_term(r);
 }
 

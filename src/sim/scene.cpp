@@ -70,37 +70,18 @@ void true_features(const core::Recipe& recipe, SimTruth& truth) {
     }
 }
 
-// Uniform in [1, max] (a draft in degrees, a fillet in mm; [max, max] below 1; 0 for none).
-double within_drawing(double max, std::mt19937_64& rng) {
-    if (max <= 0.0) return 0.0;
-    return std::uniform_real_distribution<double>(std::min(1.0, max), max)(rng);
-}
-
-// Whether every flat face keeps at least 0.3 mm and a fifth of its width without draft (the die
-// designer's choice of drafts; as the independent simulator, drafts are drawn again if not).
-bool faces_kept(const core::ForgedPart& undrafted, const core::ForgedPart& part) {
-    const auto& w0 = undrafted.level_faces_mm;
-    const auto& w = part.level_faces_mm;
-    if (w0.size() != w.size()) return false;
-    for (std::size_t i = 0; i < w.size(); ++i) {
-        const double width0 = std::abs(w0[i].second);
-        const double width = w0[i].second < 0 ? -w[i].second : w[i].second;
-        if (width < std::min(width0, std::max(0.3, 0.2 * width0))) return false;
-    }
-    return true;
-}
-
-// Per wall a draft in [1°, the drawing's], drawn until the flat faces are kept (faces_kept).
+// Per wall a draft in [1°, the drawing's], drawn until the flat faces are kept
+// (core::flat_faces_kept).
 core::Result<void> draw_drafts(const core::Recipe& recipe, std::mt19937_64& rng,
                                core::ForgedShape& shape) {
     auto undrafted = core::build_forged(recipe, shape);
     if (!undrafted) return undrafted.error();
     for (int attempt = 0; attempt < 1000; ++attempt) {
         for (const auto& w : core::forged_walls(recipe))
-            shape.draft_deg[w.name] = within_drawing(recipe.draft_of(w.section), rng);
+            shape.draft_deg[w.name] = core::draw_within(recipe.draft_of(w.section), rng);
         auto part = core::build_forged(recipe, shape);
         if (!part) return part.error();
-        if (faces_kept(*undrafted, *part)) return {};
+        if (core::flat_faces_kept(*undrafted, *part)) return {};
     }
     return core::make_error("simulate --forged: recipe '" + recipe.name +
                             "': no drafts within the drawing keep its flat faces");
@@ -123,7 +104,7 @@ core::Result<core::ForgedPart> draw_forged(const core::Recipe& recipe, const Sim
     shape.scale = truth.growth;
     if (auto ok = draw_drafts(recipe, rng, shape); !ok) return ok.error();
     for (const auto& c : core::forged_corners(recipe))
-        shape.fillet_mm[c.name] = within_drawing(recipe.fillet_at(c.level), rng);
+        shape.fillet_mm[c.name] = core::draw_within(recipe.fillet_at(c.level), rng);
     std::uniform_real_distribution<double> u01(0.0, 1.0);
     double shift = 0.8 * recipe.forging->die_shift_mm * u01(rng);
     const double azimuth = 2.0 * std::numbers::pi * u01(rng);

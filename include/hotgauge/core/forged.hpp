@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 #include <map>
 #include <optional>
+#include <random>
 #include <string>
 #include <utility>
 #include <vector>
@@ -118,5 +119,12 @@ struct ForgedPart {
 // the sections do not stack (outer, inner: each section starts where the one below ends) or the
 // parting plane does not cross an outer and an inner wall (or the axis).
 Result<ForgedPart> build_forged(const Recipe& recipe, const ForgedShape& shape);
+
+// The rules by which a forging is drawn within its drawing (the simulator's and the Embree
+// oracle's parts): a draft or fillet uniform in [1, max] ([max, max] below 1, 0 for none), and
+// the die designer's check that every flat face keeps at least min(its width without draft,
+// max(0.3 mm, a fifth of it)) — drafts that fail it are drawn again.
+double draw_within(double max, std::mt19937_64& rng);
+bool flat_faces_kept(const ForgedPart& undrafted, const ForgedPart& part);
 
 }  // namespace hotgauge::core
