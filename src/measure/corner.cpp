@@ -109,7 +109,7 @@ struct Solve {
     double rms = 0;
 };
 Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, double side, Vec5 x,
-            const CornerPrior& prior) {
+            const CornerPrior& prior, double weight) {
     const double t_mean = prior.t_mean(), t_sigma = prior.t_sigma();
     const double hold = prior.fix_draft ? 1e10 : 1.0;  // a held draft: the prior alone
     double lambda = 1e-3;
@@ -127,9 +127,12 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
             s2 += e * e;
             ++cnt;
         }
-        A = A.selfadjointView<Eigen::Lower>();
+        // Every weight-th sample is fitted (a thinned set), each standing for `weight` of them.
+        A = weight * Mat5(A.selfadjointView<Eigen::Lower>());
+        b *= weight;
+        s2 *= weight;
         if (sse) *sse = s2;
-        if (n) *n = cnt;
+        if (n) *n = static_cast<std::size_t>(static_cast<double>(cnt) * weight);
         if (JtJ) *JtJ = A;
         if (Jte) *Jte = b;
         return s2;
@@ -148,7 +151,7 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
     };
     double c0 = sse;
     with_prior(x, A, b, c0);
-    for (int it = 0; it < 50; ++it) {
+    for (int it = 0; it < 30; ++it) {
         Mat5 M = A;
         M.diagonal() += lambda * (A.diagonal().array() + 1e-9).matrix();
         const Vec5 step = -M.ldlt().solve(b);
@@ -190,16 +193,26 @@ double corner_residual(const CornerModel& m, double side, const CornerPoint& p, 
 
 std::optional<CornerFit> fit_corner(const std::vector<CornerPoint>& pts, double side,
                                     const CornerModel& start, const CornerPrior& prior) {
-    std::vector<char> use(pts.size(), 1);
+    // The fit runs on an even thinning to kFitSamples (a corner's five parameters need far fewer
+    // than the 10 000-50 000 samples near it; each fitted one stands for `stride`, so u is that
+    // of all); inliers and counts are taken on all of them.
+    constexpr std::size_t kFitSamples = 6000;
+    const std::size_t stride = std::max<std::size_t>(1, pts.size() / kFitSamples);
+    std::vector<char> use(pts.size(), 0);
+    for (std::size_t q = 0; q < pts.size(); q += stride) use[q] = 1;
     Vec5 x = to(start);
     Solve s;
-    for (int round = 0; round < 4; ++round) {
-        s = solve(pts, use, side, x, prior);
+    for (int round = 0; round < 3; ++round) {
+        s = solve(pts, use, side, x, prior, static_cast<double>(stride));
         x = s.x;
         const double thr = std::max(3.0 * s.rms, 0.02);
         for (std::size_t q = 0; q < pts.size(); ++q)
-            use[q] = std::abs(residual(from(x), side, pts[q], nullptr, nullptr)) <= thr;
+            use[q] = q % stride == 0 &&
+                     std::abs(residual(from(x), side, pts[q], nullptr, nullptr)) <= thr;
     }
+    const double thr = std::max(3.0 * s.rms, 0.02);
+    for (std::size_t q = 0; q < pts.size(); ++q)
+        use[q] = std::abs(residual(from(x), side, pts[q], nullptr, nullptr)) <= thr;
     CornerFit out;
     out.m = from(x);
     out.rms = s.rms;

@@ -261,7 +261,7 @@ void measure_die_shift(const Context& ctx, const std::vector<FeatureResult>& mea
     for (const auto& f : measured)
         if (f.kind == core::FeatureKind::kDiameter && f.hot_mm && f.centre_mm) {
             r.n_points += f.n_points;
-            if (!f.degraded && f.left_out.empty()) continue;  // a centre moved by a hole too
+            if (!f.degraded) continue;
             degraded += (degraded.empty() ? "" : ", ") + f.name;
             for (const auto& run : f.left_out)
                 if (std::find(r.left_out.begin(), r.left_out.end(), run) == r.left_out.end())
@@ -269,8 +269,7 @@ void measure_die_shift(const Context& ctx, const std::vector<FeatureResult>& mea
         }
     if (!degraded.empty()) {
         r.degraded = true;
-        r.degraded_because =
-            "from circles measured with or around untrusted profiles (" + degraded + ")";
+        r.degraded_because = "from circles measured with untrusted profiles (" + degraded + ")";
     }
     r.method = "circle centres";
     add_sector_term(r);
