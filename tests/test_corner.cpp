@@ -76,13 +76,12 @@ TEST(CornerProfile, RecoversTheSharpCornerOfDraftedFilletedEdges) {
         const auto pts = samples(truth, k.side, 20000, 0.0, rng);
         CornerModel start{{0.0, 0.0}, truth.radius + 0.4, std::tan(1.5 * kDeg), 1.25};
         const auto fit = fit_corner(pts, k.side, start, {std::tan(3.0 * kDeg), 2.5});
-        ASSERT_TRUE(fit);
-        EXPECT_NEAR(fit->m.radius, truth.radius, 1e-4) << k.side << " " << k.t_deg;
-        EXPECT_NEAR(fit->m.rho, truth.rho, 1e-3);
-        EXPECT_NEAR(std::atan(fit->m.t) / kDeg, k.t_deg, 0.02);
-        EXPECT_NEAR((fit->m.centre - truth.centre).norm(), 0.0, 1e-4);
-        EXPECT_GT(fit->n_arc, 1000);
-        EXPECT_GT(fit->n_wall, 1000);
+        EXPECT_NEAR(fit.m.radius, truth.radius, 1e-4) << k.side << " " << k.t_deg;
+        EXPECT_NEAR(fit.m.rho, truth.rho, 1e-3);
+        EXPECT_NEAR(std::atan(fit.m.t) / kDeg, k.t_deg, 0.02);
+        EXPECT_NEAR((fit.m.centre - truth.centre).norm(), 0.0, 1e-4);
+        EXPECT_GT(fit.n_arc, 1000);
+        EXPECT_GT(fit.n_wall, 1000);
     }
 }
 
@@ -94,9 +93,8 @@ TEST(CornerProfile, NoisySamplesKeepTheCornerWithinItsUncertainty) {
         const auto pts = samples(truth, 1.0, 20000, 0.05, rng);
         const auto fit = fit_corner(pts, 1.0, {{0.1, 0.1}, 35.0, std::tan(1.5 * kDeg), 1.25},
                                     {std::tan(3.0 * kDeg), 2.5});
-        ASSERT_TRUE(fit);
-        EXPECT_NEAR(fit->m.radius, truth.radius, 0.005);
-        covered += std::abs(fit->m.radius - truth.radius) <= 2.0 * fit->u_radius;
+        EXPECT_NEAR(fit.m.radius, truth.radius, 0.005);
+        covered += std::abs(fit.m.radius - truth.radius) <= 2.0 * fit.u_radius;
     }
     EXPECT_GE(covered, 8);  // k = 2
 }
@@ -113,9 +111,8 @@ TEST(CornerProfile, ASharpVerticalEdgeFitsWithoutAFillet) {
     }
     const auto fit = fit_corner(pts, -1.0, {{0.0, 0.0}, 12.0, std::tan(1.5 * kDeg), 1.25},
                                 {std::tan(3.0 * kDeg), 2.5});
-    ASSERT_TRUE(fit);
-    EXPECT_LT(fit->m.rho, 0.05);
-    EXPECT_NEAR(fit->m.radius, truth.radius, 1e-3);
+    EXPECT_LT(fit.m.rho, 0.05);
+    EXPECT_NEAR(fit.m.radius, truth.radius, 1e-3);
 }
 
 }  // namespace

@@ -191,8 +191,8 @@ double corner_residual(const CornerModel& m, double side, const CornerPoint& p, 
     return residual(m, side, p, nullptr, part);
 }
 
-std::optional<CornerFit> fit_corner(const std::vector<CornerPoint>& pts, double side,
-                                    const CornerModel& start, const CornerPrior& prior) {
+CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const CornerModel& start,
+                     const CornerPrior& prior) {
     // The fit runs on an even thinning to kFitSamples (a corner's five parameters need far fewer
     // than the 10 000-50 000 samples near it; each fitted one stands for `stride`, so u is that
     // of all); inliers and counts are taken on all of them.

@@ -77,8 +77,8 @@ struct CornerFit {
 // draft has a weak prior (the middle of the drawing's range, ± the range/√12), so a wall seen
 // too little to fix its own draft costs uncertainty rather than a value. `side`: +1 outer, −1
 // bore. u_radius is infinite when the samples do not fix the model.
-std::optional<CornerFit> fit_corner(const std::vector<CornerPoint>& pts, double side,
-                                    const CornerModel& start, const CornerPrior& prior);
+CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const CornerModel& start,
+                     const CornerPrior& prior);
 
 // The distance of a sample from the profile, and where it lies (0 plane, 1 fillet, 2 wall).
 double corner_residual(const CornerModel& m, double side, const CornerPoint& p, int* part);
