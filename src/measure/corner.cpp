@@ -211,17 +211,15 @@ CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const Cor
                      std::abs(residual(from(x), side, pts[q], nullptr, nullptr)) <= thr;
     }
     const double thr = std::max(3.0 * s.rms, 0.02);
-    for (std::size_t q = 0; q < pts.size(); ++q)
-        use[q] = std::abs(residual(from(x), side, pts[q], nullptr, nullptr)) <= thr;
     CornerFit out;
     out.m = from(x);
     out.rms = s.rms;
     std::vector<double> sum(8, 0.0);
     std::vector<int> cnt(8, 0);
-    for (std::size_t q = 0; q < pts.size(); ++q) {
-        if (!use[q]) continue;
+    for (std::size_t q = 0; q < pts.size(); ++q) {  // every sample: inlier, part, sector
         int part = 0;
         const double e = residual(out.m, side, pts[q], nullptr, &part);
+        if (std::abs(e) > thr) continue;
         (part == 0 ? out.n_plane : part == 1 ? out.n_arc : out.n_wall)++;
         if (part == 0) continue;
         const Eigen::Vector2d d = pts[q].q - out.m.centre;
