@@ -543,6 +543,43 @@ def table(parts, line):
     return "\n".join(rows), worst
 
 
+def explain_outliers(parts, line, bound):
+    """Every feature off its truth by more than `bound`: the daemon's own record of it (method,
+    faces, sectors, u, degradation) and the same archived recording measured again offline with
+    the daemon's calibration, so that a failure says whether it is the daemon's or the
+    measurement's."""
+    results = {}
+    for path in glob.glob(os.path.join(line.results_dir, "*.jsonl")):
+        for text in open(path):
+            rec = json.loads(text)
+            results[rec["part"]["part_id"]] = rec
+    keys = ("hot_mm", "cold_mm", "verdict", "method", "faces_used", "left_out", "n_points",
+            "n_sectors", "sector_spread_mm", "u_mm", "u_budget_mm", "fit_rms_mm", "reason", "edge")
+    for p in parts:
+        truth = line.truth(p["part"]) if p["state"] == DONE else {}
+        for name, slot, _ in recipe_features():
+            f = p["features"].get(slot)
+            if not f or f["um"] is None or abs(f["mm"] - truth[name]) <= bound:
+                continue
+            print(f"outlier: part {p['part']} ({p['part_id']}) {name}: {f['mm']:.4f} mm, truth "
+                  f"{truth[name]:.4f} mm", flush=True)
+            rec = results.get(str(p["part_id"]))
+            if not rec:
+                continue
+            mine = [x for x in rec["part"]["features"] if x["name"] == name]
+            print("  daemon: " + json.dumps({k: mine[0].get(k) for k in keys} if mine else None))
+            print("  daemon's part: " + json.dumps({k: rec["part"].get(k) for k in (
+                "verdict", "degraded", "degraded_reasons", "warnings", "temperature_c", "match",
+                "stage_ms", "compensation")})[:3000])
+            archived = glob.glob(os.path.join(line.archive_dir, "*", f"*_{p['part_id']}"))
+            if archived:
+                args = ["measure", archived[0], "--json"] + ["--calibration", line.calibration]
+                again = json.loads(hotgauge(line.bin_dir, *args))
+                mine = [x for x in again["features"] if x["name"] == name]
+                print(f"  offline ({archived[0]}): " +
+                      json.dumps({k: mine[0].get(k) for k in keys} if mine else None))
+
+
 def read_csvs(results_dir, names):
     rows = []
     for name in names:
@@ -953,6 +990,8 @@ def main():
         produced = [p for p in parts if p["slot"] == 1]
         text, worst = table(produced, line)
         print("\n" + text)
+        if a.check_mm is not None and worst > a.check_mm:
+            explain_outliers(produced, line, a.check_mm)
         csvs, jsonls, seqs, lines = check_results_files(line.results_dir, parts)
         sorting = check_sorting(line, parts, lines) if (a.forged or bad) else None
         master_worst = check_masters(line.results_dir, parts, lines) if line.masters else None
