@@ -513,6 +513,13 @@ TEST(Handshake, OverallVerdictRule) {
     EXPECT_EQ(overall_verdict(f, true), Verdict::kNotMeasured);
     f[0].verdict = Verdict::kNok;
     EXPECT_EQ(overall_verdict(f, false), Verdict::kNok);
+    // A feature not required: its not-measured leaves the verdict to the others; its NOK counts.
+    f[0].verdict = Verdict::kOk;
+    f[1].required = false;
+    EXPECT_EQ(overall_verdict(f, false), Verdict::kOk);
+    EXPECT_EQ(overall_verdict(f, true), Verdict::kDegraded);
+    f[1].verdict = Verdict::kNok;
+    EXPECT_EQ(overall_verdict(f, false), Verdict::kNok);
 }
 
 // ---- server: clients --------------------------------------------------------------------------

@@ -55,6 +55,13 @@ TEST(Recipe, HubALoads) {
     EXPECT_DOUBLE_EQ(r->fillet_at("bore_step"), 2.5);
     EXPECT_DOUBLE_EQ(r->forging->die_shift_mm, 0.5);
     EXPECT_EQ(r->features.back().kind, hotgauge::core::FeatureKind::kDieShift);
+    // Height 1 alone is not required (the bore step's flat ring on a forged part).
+    for (const auto& f : r->features) EXPECT_EQ(f.required, f.name != "Height 1") << f.name;
+}
+
+TEST(Recipe, RequiredIsABoolean) {
+    EXPECT_NE(error_after("required: false", "required: sometimes").find("features[7].required"),
+              std::string::npos);
 }
 
 TEST(Recipe, ForgingDrawing) {

@@ -23,8 +23,8 @@ filleted, die-shifted, scattered), and with --bad-parts K, K of them (chosen fro
 or two features moved out of tolerance by 0.4–0.8 mm (`simulate --serve --bad-part`). Then the
 PLC's registers must read NOK on exactly the features each part's truth puts out of tolerance and
 OK on every other feature of every part; Height 1 may read NOT_MEASURED on a forged part (its
-bore step ring can be all fillet, docs/measurement.md "Real forgings"), and a part whose only
-non-OK feature it is reads NOT_MEASURED. Both are counted and printed.
+bore step ring can be all fillet, docs/measurement.md "Real forgings"), which hub-a does not
+require: the part's verdict is then the other features'. Both are counted and printed.
 
 With --master-at K the cold master (docs/verification.md) comes down the conveyor after part K,
 twice: once triggered in master slot 9, whose certificate is written from the master's truth (as
@@ -845,8 +845,8 @@ def bad_schedule(seed, n_parts, k):
 
 def check_sorting(line, parts, lines):
     """The PLC's feature verdicts against each part's truth: NOK on exactly the features out of
-    tolerance, OK on the others; Height 1 may be NOT_MEASURED (then the part reads NOT_MEASURED
-    unless a feature is NOK). Prints one line per part, and every verdict that differs from the
+    tolerance, OK on the others; a feature the recipe does not require (hub-a's Height 1) may be
+    NOT_MEASURED, and the part's verdict is then the others'. Prints one line per part, and every verdict that differs from the
     truth's; returns (bad parts, NOK features read, parts with Height 1 not measured, the
     differences)."""
     recipe = yaml.safe_load(open(os.path.join(REPO, "config/parts/hub-a.yaml")))
@@ -877,8 +877,8 @@ def check_sorting(line, parts, lines):
                 nok.append(name)
             if min(abs(cold - lo), abs(cold - hi)) <= VERDICT_MARGIN_MM:
                 unsure.append(name)
-            elif got == "NOT_MEASURED" and name == "Height 1" and not out:
-                not_measured.append(f"Height 1 ({jf[slot].get('reason')})")
+            elif got == "NOT_MEASURED" and not spec.get("required", True) and not out:
+                not_measured.append(f"{name} ({jf[slot].get('reason')})")
             elif got != want:
                 measured = p["features"][slot]["mm"] if p["features"][slot]["um"] is not None \
                     else None
@@ -886,7 +886,7 @@ def check_sorting(line, parts, lines):
                               f"{'outside' if out else 'inside'} {lo:.3f}..{hi:.3f}"
                               + (f" (measured {measured:.4f})" if measured is not None else
                                  f" ({jf[slot].get('reason')})"))
-        want_part = "NOK" if want_nok else "NOT_MEASURED" if not_measured else "OK"
+        want_part = "NOK" if want_nok else "OK"
         if not unsure and not differ and p["verdict"] != want_part:
             differ.append(f"part verdict {p['verdict']}, expected {want_part}")
         bad = line.truth_bad_mm(p["part"])
@@ -1009,7 +1009,7 @@ def main():
                 print(f"sorting: {n_bad} bad parts, {n_nok} NOK features read by the PLC, each on "
                       f"a feature out of tolerance by the truth, every other feature OK"
                       + (f" but Height 1 not measured on {n_h1} parts (no flat part on the bore "
-                         "step: those parts read NOT_MEASURED unless a feature is NOK)"
+                         "step; not required, so their verdicts are the other features')"
                          if n_h1 else ""))
         if cal:
             found, missing, total, before = measure_archived(line, produced, NOMINAL)

@@ -52,6 +52,7 @@ plc::PartResult to_plc(const pipeline::PartResult& r, const pipeline::Verificati
         v.name = f.name;
         v.slot = f.slot;
         v.verdict = to_plc(f.verdict);
+        v.required = f.required;
         if (v.verdict != plc::Verdict::kNotMeasured) v.value_mm = f.cold_mm;
         if (!v.value_mm) v.verdict = plc::Verdict::kNotMeasured;
         v.reasons = feature_reasons(f, check);

@@ -49,8 +49,9 @@ FeatureSpec read_feature(const YamlReader& y, const YAML::Node& n, const std::st
                          const Recipe& r) {
     y.expect_map(n, w,
                  {"name", "slot", "kind", "faces", "section", "edge_at", "from", "to", "method",
-                  "nominal_mm", "tolerance_mm"});
+                  "nominal_mm", "tolerance_mm", "required"});
     FeatureSpec f;
+    if (n["required"]) f.required = y.boolean(n["required"], w + ".required");
     f.name = y.string(y.require(n, w, "name"), w + ".name");
     const std::int64_t slot = y.integer(y.require(n, w, "slot"), w + ".slot");
     if (slot < 1 || slot > 1000) y.fail(n["slot"], w + ".slot: must be in 1..1000");

@@ -39,6 +39,9 @@ struct CornerPoint {
     Eigen::Vector2d q;
     double h;
     Eigen::Vector2d ray = Eigen::Vector2d::Zero();
+    // The profile it was seen in (unique over the faces), or −1: samples of one profile share
+    // its vibration residual, which u must count once per profile, not once per sample.
+    std::int64_t profile = -1;
 };
 
 // The corner's profile in the half-plane (s, h) about `centre`: s = side·(r − radius) is how far
@@ -51,6 +54,12 @@ struct CornerModel {
     double radius = 0;  // the theoretical sharp corner: where the wall meets the plane
     double t = 0;
     double rho = 0;
+    // A short step (the recess, 5 mm deep): the wall ends a depth below in the step's other
+    // level, h = −depth, beyond the wall, through a concave fillet of radius rho2. Its wall may
+    // be too short to be seen at all; the two fillets, both tangent to it, then fix its draft.
+    // depth 0: no far corner in the model (the wall runs on out of the samples' window).
+    double depth = 0;
+    double rho2 = 0;
 };
 
 struct CornerPrior {
@@ -61,15 +70,23 @@ struct CornerPrior {
     bool fix_draft = false;
     // A draft measured elsewhere (the wall seen broadside by another face): held there instead.
     std::optional<double> t_known = std::nullopt, t_known_u = std::nullopt;
+    // A short step's nominal depth to its far level (a far corner in the model), or 0.
+    double depth = 0;
     double t_mean() const { return t_known ? *t_known : 0.5 * t_max; }
     double t_sigma() const;  // the drawing's range / √12, or the measured draft's u
 };
 
 struct CornerFit {
     CornerModel m;
-    double u_radius = 0;  // standard uncertainty of `radius` (σ²·(JᵀJ)⁻¹, prior included)
+    // Standard uncertainty of `radius`: σ²·(JᵀJ)⁻¹ (priors included), or, when larger, the
+    // jackknife's over groups of profiles.
+    double u_radius = 0;
+    // What the radius moves by when the model's window moves (a far corner: the far level taken
+    // 1.5 or 4 mm beyond its fillet): its shape is not quite the drawing's. 0 when not tried.
+    double u_model = 0;
     double rms = 0;
     std::int64_t n_wall = 0, n_arc = 0, n_plane = 0;  // inliers by the part of the profile
+    std::int64_t n_far = 0;                           // on the far fillet and the far level
     std::vector<double> sector_radius;                // the radius from each sector's points
 };
 
@@ -80,7 +97,8 @@ struct CornerFit {
 CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const CornerModel& start,
                      const CornerPrior& prior);
 
-// The distance of a sample from the profile, and where it lies (0 plane, 1 fillet, 2 wall).
+// The distance of a sample from the profile, and where it lies (0 plane, 1 fillet, 2 wall, 3 far
+// fillet, 4 far level).
 double corner_residual(const CornerModel& m, double side, const CornerPoint& p, int* part);
 
 // Diameter `f` at its theoretical sharp corner when its edge is filleted or its wall seen: the

@@ -54,15 +54,16 @@ FeatureResult skeleton(const FeatureSpec& f) {
     r.nominal_mm = f.nominal_mm;
     r.tol_lower_mm = f.tol_lower_mm;
     r.tol_upper_mm = f.tol_upper_mm;
+    r.required = f.required;
     return r;
 }
 
-// NOK (of a trusted value) before not measured before degraded before OK.
+// NOK (of a trusted value) before not measured (of a required feature) before degraded before OK.
 Verdict overall(const std::vector<FeatureResult>& features) {
     bool any_not = features.empty(), any_degraded = false;
     for (const auto& f : features) {
         if (f.verdict == Verdict::kNok) return Verdict::kNok;
-        any_not = any_not || f.verdict == Verdict::kNotMeasured;
+        any_not = any_not || (f.verdict == Verdict::kNotMeasured && f.required);
         any_degraded = any_degraded || f.verdict == Verdict::kDegraded;
     }
     return any_not ? Verdict::kNotMeasured : any_degraded ? Verdict::kDegraded : Verdict::kOk;

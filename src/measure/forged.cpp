@@ -47,6 +47,31 @@ double wall_depth(const Context& ctx, const core::FeatureSpec& f) {
     return std::max(0.0, std::abs(z_o - z_e) - stop) * ctx.ex.g;
 }
 
+// A short step (hub-a's recess, 5 mm): its wall ends in the section's other level, facing the
+// same sensor, beyond the wall, so close that the two fillets may hide the wall. Its nominal
+// depth (hot, mm) when it is one, else 0: the far corner then enters the corner's model.
+double step_depth(const Context& ctx, const core::FeatureSpec& f, double side) {
+    const core::Section* s = ctx.recipe.section(f.section);
+    const std::string& other = f.edge_at == s->from_level ? s->to_level : s->from_level;
+    const double R = 0.5 * s->diameter_mm, rho_max = ctx.recipe.fillet_at(f.edge_at);
+    const double z_e = ctx.level_z(f.edge_at), z_o = ctx.level_z(other);
+    const double zp = ctx.recipe.forging->parting_z_mm;
+    const double D = std::abs(z_o - z_e);
+    if ((zp - z_e) * (zp - z_o) < 0.0 || D > 2.0 * rho_max + 4.0) return 0.0;
+    // This level's face runs inside the corner circle, the other's beyond it, both facing alike
+    // and the other wide enough to be seen past its fillet.
+    const auto face_at = [&](double z, bool beyond) -> std::optional<Annulus> {
+        for (const Annulus& a : annuli_at(ctx.solid, z))
+            if ((side > 0) == beyond ? a.lo == R : a.hi == R) return a;
+        return std::nullopt;
+    };
+    const auto here = face_at(z_e, false), there = face_at(z_o, true);
+    if (!here || !there || here->facing != there->facing ||
+        there->hi - there->lo < ctx.recipe.fillet_at(other) + 1.0)
+        return 0.0;
+    return D * ctx.ex.g;
+}
+
 // The samples near the corner circle (c, R) in the plane's frame: h in [−depth, 0.5], s (beyond
 // the circle) in [−s_in, s_out].
 std::vector<CornerPoint> corner_points(const std::vector<const FaceFrame*>& frames,
@@ -57,7 +82,8 @@ std::vector<CornerPoint> corner_points(const std::vector<const FaceFrame*>& fram
     const double up = ep.plane.normal.z() > 0 ? 1.0 : -1.0;
     const double za = z0 - up * depth * nz, zb = z0 + up * kAbove;
     std::vector<CornerPoint> out;
-    for (const auto* fr : frames)
+    for (std::size_t face = 0; face < frames.size(); ++face) {
+        const FaceFrame* fr = frames[face];
         fr->for_z(std::min(za, zb) - 1.0, std::max(za, zb) + 1.0, [&](const FaceFrame::Near& n) {
             const Eigen::Vector3d p = n.p.cast<double>();
             const double h = ep.plane.distance(p);
@@ -71,8 +97,10 @@ std::vector<CornerPoint> corner_points(const std::vector<const FaceFrame*>& fram
                                                ? Eigen::Vector2d((q - c).normalized())
                                                : Eigen::Vector2d::UnitX();
             const Eigen::Vector2d in_plane(ray.dot(ep.e1), ray.dot(ep.e2));
-            out.push_back({q, h, {in_plane.dot(radial), ray.dot(ep.plane.normal)}});
+            const auto profile = static_cast<std::int64_t>(n.q / fr->w + face * 1'000'000);
+            out.push_back({q, h, {in_plane.dot(radial), ray.dot(ep.plane.normal)}, profile});
         });
+    }
     return out;
 }
 
@@ -150,6 +178,46 @@ std::optional<Draft> wall_draft(const std::vector<const FaceFrame*>& wall_frames
 
 }  // namespace
 
+// The corner of a wall seen too little to fix its own draft (top and bottom sensors lose a
+// 1-3° wall at grazing incidence). Its draft is held at the slope the side faces see, when they
+// see the wall; else, on a short step whose far corner is seen, the wall is the common tangent
+// of its two fillets, which fix its draft; else the draft is held at the drawing's middle. What
+// a held draft may be off goes into u.
+CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
+                          const std::vector<const FaceFrame*>& wall_frames, const EdgePlane& ep,
+                          double side, const CornerModel& m, double s_in, double s_beyond,
+                          double depth, double step, CornerPrior& prior) {
+    const auto d = wall_draft(wall_frames, ep, side, m, depth, prior.t_max);
+    if (!d && step > 0.0) {
+        // The far fillet and 1.5 mm of the far level in the window; again with 4 mm, for how
+        // much the result leans on the model's shape.
+        const double rho2 = m.rho2 > 0.0 ? m.rho2 : prior.rho_max;
+        prior.depth = step;
+        std::optional<CornerFit> far;
+        for (const double level_mm : {1.5, 4.0}) {
+            const auto pts = corner_points(frames, ep, side, m.centre, m.radius, s_in,
+                                           s_beyond + prior.t_max * step + rho2 + level_mm,
+                                           step + 0.5);
+            CornerFit f = fit_corner(pts, side, m, prior);
+            if (f.n_far < kMinProfileSamples) break;
+            if (far) {
+                far->u_model = std::abs(f.m.radius - far->m.radius);
+                return *far;
+            }
+            far = f;
+        }
+        prior.depth = 0.0;
+    }
+    const auto pts = corner_points(frames, ep, side, m.centre, m.radius, s_in,
+                                   s_beyond + 0.5 + prior.t_max * depth, depth);
+    prior.fix_draft = true;
+    if (d) {
+        prior.t_known = d->t;
+        prior.t_known_u = d->u;
+    }
+    return fit_corner(pts, side, {m.centre, m.radius, prior.t_mean(), m.rho}, prior);
+}
+
 bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
                      const std::vector<const FaceFrame*>& frames,
                      const std::vector<const FaceFrame*>& wall_frames, const EdgePlane& ep,
@@ -157,32 +225,30 @@ bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
     const core::ForgingSpec& forging = *ctx.recipe.forging;
     CornerPrior prior{std::tan(ctx.recipe.draft_of(f.section) / kRadToDeg),
                       ctx.recipe.fillet_at(f.edge_at)};
-    const double depth = wall_depth(ctx, f);
+    const double depth = wall_depth(ctx, f), step = step_depth(ctx, f, side);
     const double R_e = ctx.ex.z(0.5 * ctx.recipe.section(f.section)->diameter_mm);
     // Where the corner may be: the window of a sorting gauge and the die shift about the axis.
     const double slack = ctx.ex.tol(ctx.c.edge_window_mm, R_e) * 0.5 + forging.die_shift_mm;
     CornerModel m{ep.axis2d(), R_e, 0.5 * prior.t_max, 0.5 * prior.rho_max};
     std::optional<CornerFit> fit;
-    // Wide around the expected circle, then tight around the fitted one. A wall seen too little
-    // to fix its own draft (top and bottom sensors lose a 1-3° wall at grazing incidence): the
-    // draft held at the drawing's middle, and its uncertainty in u.
+    // Wide around the expected circle, then tight around the fitted one.
     for (int pass = 0; pass < 2; ++pass) {
         const double s_in = pass == 0 ? prior.rho_max + 1.0 + slack : m.rho + 1.5;
-        const double s_out = (pass == 0 ? slack + 0.5 : 0.5) + prior.t_max * depth;
-        const auto pts = corner_points(frames, ep, side, m.centre, m.radius, s_in, s_out, depth);
+        const double s_beyond = pass == 0 ? slack : 0.0;
+        const auto pts = corner_points(frames, ep, side, m.centre, m.radius, s_in,
+                                       s_beyond + 0.5 + prior.t_max * depth, depth);
         prior.fix_draft = false;
-        fit = fit_corner(pts, side, m, prior);
+        prior.depth = 0.0;
+        fit = fit_corner(pts, side, {m.centre, m.radius, m.t, m.rho}, prior);
         // Sharp, or nothing beyond the plane: the edge brackets (decided on the free fit).
         if (fit->n_arc + fit->n_wall < kMinProfileSamples || !fillet_seen(*fit, s_in) ||
             fit->m.rho < kSharpRhoMm)
             return false;
         if (fit->n_wall < kMinWallSamples) {
-            prior.fix_draft = true;
-            if (const auto d = wall_draft(wall_frames, ep, side, fit->m, depth, prior.t_max)) {
-                prior.t_known = d->t;
-                prior.t_known_u = d->u;
-            }
-            fit = fit_corner(pts, side, {m.centre, m.radius, prior.t_mean(), m.rho}, prior);
+            CornerModel start = fit->m;
+            start.rho2 = m.rho2;
+            fit = fit_hidden_wall(frames, wall_frames, ep, side, start, s_in, s_beyond, depth,
+                                  step, prior);
         }
         m = fit->m;
     }
@@ -192,11 +258,13 @@ bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
     }
     r.hot_mm = 2.0 * m.radius;
     r.u_budget = {{"fit", 2.0 * fit->u_radius}, {"compensation", ep.profile_scatter}};
+    if (fit->u_model > 0.0) r.u_budget.emplace_back("model", 2.0 * fit->u_model);
 
     r.fit_rms_mm = fit->rms;
     r.n_points = fit->n_arc + fit->n_wall;
     // The draft's own uncertainty is in the fit's (the prior's row of the normal matrix).
-    r.method = !prior.fix_draft ? "corner profile"
+    r.method = prior.depth > 0.0 ? "corner profile, draft from the step's two fillets"
+               : !prior.fix_draft ? "corner profile"
                : prior.t_known  ? "corner profile, draft from the side faces"
                                 : "corner profile, draft from the drawing";
     r.arc_deg = 45.0 * static_cast<double>(fit->sector_radius.size());

@@ -362,6 +362,7 @@ std::string to_json(const PartResult& r) {
         fj["deviation_mm"] = opt(f.deviation_mm);
         fj["tolerance_mm"] = {f.tol_lower_mm, f.tol_upper_mm};
         fj["verdict"] = measure::to_string(f.verdict);
+        fj["required"] = f.required;
         fj["reason"] = f.reason.empty() ? json() : json(f.reason);
         fj["degraded"] = f.degraded;
         fj["face_missing"] = f.face_missing;

@@ -8,8 +8,9 @@ namespace hotgauge::plc {
 
 Verdict overall_verdict(const std::vector<FeatureValue>& features, bool degraded) {
     const auto any = [&](Verdict v) {
-        return std::any_of(features.begin(), features.end(),
-                           [v](const FeatureValue& f) { return f.verdict == v; });
+        return std::any_of(features.begin(), features.end(), [v](const FeatureValue& f) {
+            return f.verdict == v && (f.required || v != Verdict::kNotMeasured);
+        });
     };
     if (any(Verdict::kNok)) return Verdict::kNok;
     if (any(Verdict::kNotMeasured)) return Verdict::kNotMeasured;

@@ -3,7 +3,8 @@
 
 The truth names a feature by face and name ("side1", "Height 3"); the recipe names it
 "Height 3 side1". Prints one line per feature; with --limit, exits 1 when a measured feature is
-off by more than the limit or a feature the truth has is not measured (Height 1 may be)."""
+off by more than the limit or a feature the truth has is not measured (Height 1 may be), with
+--nok when the NOK features are not those, with --verdict when the part's verdict is not that."""
 import argparse
 import json
 import subprocess
@@ -24,6 +25,7 @@ def main():
                     help="features besides Height 1 that may be NOT_MEASURED")
     ap.add_argument("--nok", default=None,
                     help="comma-separated features that must read NOK, all others not NOK")
+    ap.add_argument("--verdict", help="the part's verdict it must read (OK, NOK, ...)")
     ap.add_argument("extra", nargs="*")
     a = ap.parse_args()
     truth = json.load(open(f"{a.recording_dir}/truth.json"))
@@ -54,6 +56,9 @@ def main():
         if got_nok != want:
             print(f"  NOK on {sorted(got_nok)}, expected {sorted(want)}")
             bad += 1
+    if a.verdict and out["verdict"] != a.verdict:
+        print(f"  part verdict {out['verdict']}, expected {a.verdict}")
+        bad += 1
     if bad:
         sys.exit(1)
 

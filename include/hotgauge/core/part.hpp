@@ -45,6 +45,10 @@ struct FeatureSpec {
     double tol_lower_mm = 0.0;  // allowed deviation below nominal (negative or zero)
     double tol_upper_mm = 0.0;  // allowed deviation above nominal
     int slot = 0;               // result slot (PLC register block index), 1-based
+    // The part's verdict waits for it (recipe key `required`, default true). A feature that is
+    // not required still reads NOK and makes the part NOK; not measured, it leaves the part's
+    // verdict to the others (docs/recipes.md "Features the verdict does not wait for").
+    bool required = true;
 };
 
 // How the part is found in the scans (docs/matching.md); recipe key `matching`.

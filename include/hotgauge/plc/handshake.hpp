@@ -26,6 +26,7 @@ struct FeatureValue {
     int slot = 0;                             // register block 1..kMaxFeatures
     std::optional<double> value_mm;           // absent: not measured (verdict must say so)
     Verdict verdict = Verdict::kNotMeasured;  // kOk, kNok, kNotMeasured or kDegraded
+    bool required = true;  // not measured, a feature not required leaves the overall verdict
     DriftState drift = DriftState::kNone;
     std::uint8_t reasons = 0;  // reason:: bits 0..7
 };
