@@ -571,6 +571,13 @@ def explain_outliers(parts, line, bound):
             print("  daemon's part: " + json.dumps({k: rec["part"].get(k) for k in (
                 "verdict", "degraded", "degraded_reasons", "warnings", "temperature_c", "match",
                 "stage_ms", "compensation")})[:3000])
+            # Each scan as the daemon received it: a face short of its scan_s lost its tail (the
+            # virtual cell's 'rendering:' line at the end of its log says whether it fell behind).
+            print("  daemon's scans: " + "; ".join(
+                f"{f['name']} {f['profiles']} profiles over {f['scan_s']:.3f} s, accelerometer "
+                f"{f.get('accel_margin_before_s', 0):.3f} s before / "
+                f"{f.get('accel_margin_after_s', 0):.3f} s after"
+                for f in rec["part"].get("faces", [])))
             archived = glob.glob(os.path.join(line.archive_dir, "*", f"*_{p['part_id']}"))
             if archived:
                 args = ["measure", archived[0], "--json"] + ["--calibration", line.calibration]

@@ -558,8 +558,16 @@ void GvDevice::Impl::run_stream() {
             // camera drops the frame in progress (it belongs to no acquisition now).
             std::lock_guard lock(camera_mutex);
             if (arv_fake_camera_get_acquisition_status(camera) == 0 ||
-                starts_seen != acquisition_starts)
+                starts_seen != acquisition_starts) {
+                std::lock_guard stats_lock(stats_mutex);
+                ++stats.stopped_while_rendered;
                 continue;
+            }
+        }
+        if (const std::int64_t late_us = real_time_us() - next_us - period_us; late_us > 0) {
+            std::lock_guard lock(stats_mutex);
+            ++stats.late;
+            stats.max_late_us = std::max(stats.max_late_us, late_us);
         }
         const bool lose_start =
             req.frame_in_acquisition < config.lose_scan_start &&

@@ -68,6 +68,12 @@ struct GvDeviceStats {
     std::uint64_t resend_requests = 0;     // PACKETRESEND commands received
     std::uint64_t resent = 0;              // packets sent again
     std::uint64_t resend_unavailable = 0;  // asked for packets no longer buffered
+    // Rendering slower than real time: frames that went out more than a frame period after
+    // their timestamp (their content is still that of their time), the largest such delay, and
+    // frames rendered in vain because the acquisition stopped meanwhile (a scan's lost tail).
+    std::uint64_t late = 0;
+    std::int64_t max_late_us = 0;
+    std::uint64_t stopped_while_rendered = 0;
 };
 
 // Thread safety: stats() from any thread; the renderer runs on the stream thread.
