@@ -179,8 +179,8 @@ TEST(CornerProfile, AStepsTwoFilletsFixTheDraftOfAWallNotSeen) {
             pts.push_back({truth.centre + r * Eigen::Vector2d(std::cos(phi), std::sin(phi)),
                            sh.y() + sigma * noise(rng), Eigen::Vector2d(0.0, 1.0)});
         }
-        const auto fit = fit_corner(pts, -1.0, {{0.0, 0.0}, 27.5, std::tan(1.5 * kDeg), 1.25},
-                                    prior);
+        const auto fit =
+            fit_corner(pts, -1.0, {{0.0, 0.0}, 27.5, std::tan(1.5 * kDeg), 1.25}, prior);
         EXPECT_LT(fit.n_wall, 200);  // the tangent points' noise only
         EXPECT_GT(fit.n_far, 5000);
         if (trial == 0) {  // exact samples: the exact corner, though the wall was never seen

@@ -3,6 +3,7 @@
 // statsmodels in test_quality; here: that the report feeds them the right values.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 #include <random>
 #include <string>
@@ -115,6 +116,34 @@ TEST(LotReport, PageHasTwoChartsPerFeatureWithValuesAndNoOutsideReference) {
     EXPECT_EQ(count(few, "<svg class='chart'"), 2u);
     EXPECT_NE(few.find("10 values measured OK or NOK, 20 needed"), std::string::npos);
     EXPECT_EQ(count(few, "UCL"), 0u);
+}
+
+// A die shift of a few µm in a [0, 0.5] mm tolerance: its bins are narrower than a pixel, and
+// each bar is still drawn 2 px wide on whole pixels (an antialiased sliver of 1 px at a
+// fractional x showed no bar colour at all in Chromium).
+TEST(LotReport, BarsFarInsideAWideToleranceAreWholePixels) {
+    std::vector<results::PartRecord> parts;
+    for (int i = 1; i <= 5; ++i) {
+        results::PartRecord p;
+        p.sequence = std::uint64_t(i);
+        p.time = "2026-12-04T08:0" + std::to_string(i) + ":00.000+01:00";
+        p.part_id = std::to_string(240000 + i);
+        p.recipe = "hub-a";
+        p.verdict = "OK";
+        p.features.push_back({"Die shift", 14, 0.0, 0.0, 0.5, 0.001 * i, 0.01, "OK", ""});
+        parts.push_back(p);
+    }
+    const std::string html = report::lot_report_html(report::summarize_lot(parts, {}), {});
+    std::size_t bars = 0;
+    for (auto at = html.find("<rect class='bar'"); at != std::string::npos;
+         at = html.find("<rect class='bar'", at + 1), ++bars) {
+        const auto attr = [&](const std::string& name) {
+            return std::stod(html.substr(html.find(name + "='", at) + name.size() + 2));
+        };
+        EXPECT_GE(attr("width"), 2.0);
+        EXPECT_EQ(attr("x"), std::floor(attr("x")));
+    }
+    EXPECT_EQ(bars, 5u);
 }
 
 TEST(LotReport, DriftIsMarkedWhereTheEwmaLeavesItsLimits) {

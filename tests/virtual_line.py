@@ -575,8 +575,8 @@ def explain_outliers(parts, line, bound):
             # virtual cell's 'rendering:' line at the end of its log says whether it fell behind).
             print("  daemon's scans: " + "; ".join(
                 f"{f['name']} {f['profiles']} profiles over {f['scan_s']:.3f} s, accelerometer "
-                f"{f.get('accel_margin_before_s', 0):.3f} s before / "
-                f"{f.get('accel_margin_after_s', 0):.3f} s after"
+                f"{f.get('accel_margin_before_s') or 0:.3f} s before / "
+                f"{f.get('accel_margin_after_s') or 0:.3f} s after"
                 for f in rec["part"].get("faces", [])))
             archived = glob.glob(os.path.join(line.archive_dir, "*", f"*_{p['part_id']}"))
             if archived:

@@ -234,11 +234,12 @@ int serve(SimulateArgs a, const core::Recipe& recipe, const sim::CellConfig& cel
         static_cast<unsigned long long>(st.accel_datagrams),
         static_cast<unsigned long long>(st.accel_samples),
         static_cast<unsigned long long>(st.accel_send_errors));
-    std::printf("rendering: %llu frames sent later than a frame period after their time (up to "
-                "%.1f ms), %llu rendered in vain (their acquisition stopped meanwhile)\n",
-                static_cast<unsigned long long>(st.camera.late),
-                static_cast<double>(st.camera.max_late_us) * 1e-3,
-                static_cast<unsigned long long>(st.camera.stopped_while_rendered));
+    std::printf(
+        "rendering: %llu frames sent later than a frame period after their time (up to "
+        "%.1f ms), %llu rendered in vain (their acquisition stopped meanwhile)\n",
+        static_cast<unsigned long long>(st.camera.late),
+        static_cast<double>(st.camera.max_late_us) * 1e-3,
+        static_cast<unsigned long long>(st.camera.stopped_while_rendered));
     if (a.vc.replay) {
         const vcell::EncodeStats e = vcell.replay_stats();
         std::printf(

@@ -88,11 +88,11 @@ Ortho ortho(const CornerModel& m, double s, double h) {
     return o;
 }
 
-// Residual and its gradient with respect to (cx, cy, radius, t, rho, rho2, depth). With the sample's ray, the
-// residual is the distance along the ray to the profile: the range noise lies along the ray, and
-// an orthogonal fit of a fillet seen along the axis, whose steep part turns that noise
-// sideways, read the corner 5-8 µm small at σ 0.05 mm (a 2-D model: −7.7 µm orthogonal, −0.2 µm
-// along the ray; the same samples with the noise along the normal +1.1 µm). Grazing rays (the
+// Residual and its gradient with respect to (cx, cy, radius, t, rho, rho2, depth). With the
+// sample's ray, the residual is the distance along the ray to the profile: the range noise lies
+// along the ray, and an orthogonal fit of a fillet seen along the axis, whose steep part turns that
+// noise sideways, read the corner 5-8 µm small at σ 0.05 mm (a 2-D model: −7.7 µm orthogonal, −0.2
+// µm along the ray; the same samples with the noise along the normal +1.1 µm). Grazing rays (the
 // ray within 12° of the profile) keep the orthogonal distance. That compromise has its price
 // where the profile is steep over a long stretch (a step's two fillets with its wall unseen: the
 // corner 6 µm small at σ 0.05 mm, tests/test_corner.cpp; orthogonal alone reads it 6 µm large).
@@ -304,10 +304,7 @@ CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const Cor
         int part = 0;
         const double e = residual(out.m, side, pts[q], nullptr, &part);
         if (std::abs(e) > thr) continue;
-        (part == 0   ? out.n_plane
-         : part == 1 ? out.n_arc
-         : part == 2 ? out.n_wall
-                     : out.n_far)++;
+        (part == 0 ? out.n_plane : part == 1 ? out.n_arc : part == 2 ? out.n_wall : out.n_far)++;
         if (part == 0 || part >= 3) continue;  // the corner's circle: its fillet and wall
         const Eigen::Vector2d d = pts[q].q - out.m.centre;
         const double turn = (std::atan2(d.y(), d.x()) + std::numbers::pi) / (2 * std::numbers::pi);

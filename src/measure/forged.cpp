@@ -195,9 +195,9 @@ CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
         prior.depth = step;
         std::optional<CornerFit> far;
         for (const double level_mm : {1.5, 4.0}) {
-            const auto pts = corner_points(frames, ep, side, m.centre, m.radius, s_in,
-                                           s_beyond + prior.t_max * step + rho2 + level_mm,
-                                           step + 0.5);
+            const auto pts =
+                corner_points(frames, ep, side, m.centre, m.radius, s_in,
+                              s_beyond + prior.t_max * step + rho2 + level_mm, step + 0.5);
             CornerFit f = fit_corner(pts, side, m, prior);
             if (f.n_far < kMinProfileSamples) break;
             if (far) {
@@ -247,8 +247,8 @@ bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
         if (fit->n_wall < kMinWallSamples) {
             CornerModel start = fit->m;
             start.rho2 = m.rho2;
-            fit = fit_hidden_wall(frames, wall_frames, ep, side, start, s_in, s_beyond, depth,
-                                  step, prior);
+            fit = fit_hidden_wall(frames, wall_frames, ep, side, start, s_in, s_beyond, depth, step,
+                                  prior);
         }
         m = fit->m;
     }
@@ -263,10 +263,10 @@ bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
     r.fit_rms_mm = fit->rms;
     r.n_points = fit->n_arc + fit->n_wall;
     // The draft's own uncertainty is in the fit's (the prior's row of the normal matrix).
-    r.method = prior.depth > 0.0 ? "corner profile, draft from the step's two fillets"
+    r.method = prior.depth > 0.0  ? "corner profile, draft from the step's two fillets"
                : !prior.fix_draft ? "corner profile"
-               : prior.t_known  ? "corner profile, draft from the side faces"
-                                : "corner profile, draft from the drawing";
+               : prior.t_known    ? "corner profile, draft from the side faces"
+                                  : "corner profile, draft from the drawing";
     r.arc_deg = 45.0 * static_cast<double>(fit->sector_radius.size());
     r.n_sectors = static_cast<int>(fit->sector_radius.size());
     if (fit->sector_radius.size() >= 2) r.sector_spread_mm = 2.0 * sample_std(fit->sector_radius);

@@ -72,7 +72,7 @@ struct FeatureResult {
     std::vector<std::string> faces;
     Verdict verdict = Verdict::kNotMeasured;
     bool required = true;  // the part's verdict waits for it (core::FeatureSpec::required)
-    std::string reason;  // why not measured / NOK / degraded; empty when OK
+    std::string reason;    // why not measured / NOK / degraded; empty when OK
     // What the data lacked, for the PLC's reason bits (docs/plc-modbus.md "Reason bits"): a face
     // it needs is not in the recording; its edge seen on less than free_centre_min_arc_deg.
     bool face_missing = false;
