@@ -493,6 +493,12 @@ TEST(Handshake, InvalidResultIsAnInternalFault) {
     r = derived_result(5, 3);
     r.features[0].verdict = Verdict::kDegraded;
     expect_rejected(r, "overall OK with a degraded feature");
+    r = derived_result(5, 3);  // a feature not required, not measured: the others' OK stands
+    r.features[1].verdict = Verdict::kNotMeasured;
+    r.features[1].value_mm.reset();
+    expect_rejected(r, "overall OK with a required feature not measured");
+    r.features[1].required = false;
+    EXPECT_TRUE(check_result(r)) << "overall OK, a feature not required not measured";
     r.overall = Verdict::kDegraded;  // map version 2: a feature may be degraded, with its value
     EXPECT_TRUE(check_result(r));
     r = derived_result(5, kMaxFeatures);

@@ -654,8 +654,12 @@ def check_plc_status(bin_dir, parts, lines, calibrated):
         assert p["scans_done_ns"] and p["scans_done_state"] == BUSY, \
             f"part {p['part_id']}: scan phase 2 not seen before DONE"
         reasons = check_reasons(p, j)
-        # An OK part can only have been seen on less arc (information, not a fault).
-        assert p["slot"] != 1 or reasons & ~LOW_COVERAGE == 0 or p["verdict"] != "OK", \
+        # An OK part can only have been seen on less arc, or miss a feature it does not require
+        # (information, not a fault).
+        allowed = LOW_COVERAGE | (NOT_MEASURED if any(
+            not f.get("required", True) and f["verdict"] == "NOT_MEASURED"
+            for f in j["part"]["features"]) else 0)
+        assert p["slot"] != 1 or reasons & ~allowed == 0 or p["verdict"] != "OK", \
             (reasons, p["verdict"])
         if p["slot"] == 1:
             assert p["recipe_revision"] == revision, (p["recipe_revision"], revision)

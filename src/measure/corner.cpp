@@ -151,7 +151,7 @@ struct Prior1 {
     double mean, sigma, hold, hold_u;
 };
 Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, double side, Vec7 x,
-            const CornerPrior& prior, double weight) {
+            const CornerPrior& prior, double weight, int iterations = 30) {
     // The draft: weak (the middle of the drawing's range), or held (a wall out of view, its u
     // the prior's). A far corner's fillet and depth: weak (the drawing's range, the step's
     // nominal depth ± 0.5 mm); without a far corner both are held at 0.
@@ -205,7 +205,7 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
     };
     double c0 = sse;
     with_prior(x, A, b, c0);
-    for (int it = 0; it < 30; ++it) {
+    for (int it = 0; it < iterations; ++it) {
         Mat7 M = A;
         M.diagonal() += lambda * (A.diagonal().array() + 1e-9).matrix();
         const Vec7 step = -M.ldlt().solve(b);
@@ -251,7 +251,8 @@ double jackknife_u(const std::vector<CornerPoint>& pts, const std::vector<char>&
         std::vector<char> keep = use;
         for (std::size_t q = 0; q < pts.size(); ++q)
             keep[q] = keep[q] && pts[q].profile % kGroups != g;
-        radius[g] = solve(pts, keep, side, x, prior, static_cast<double>(stride)).x[2];
+        // From the whole fit's solution a few steps reach the group's: they differ by its share.
+        radius[g] = solve(pts, keep, side, x, prior, static_cast<double>(stride), 3).x[2];
     }
     double mean = 0, var = 0;
     for (const double r : radius) mean += r / kGroups;

@@ -40,9 +40,11 @@ core::Result<void> check_result(const PartResult& r) {
     if (r.overall == Verdict::kNone)
         return core::make_error(
             "result: overall verdict must be OK, NOK, not measured or degraded");
+    // OK overall: every feature OK, but a feature not required may be not measured.
     if (r.overall == Verdict::kOk &&
-        !std::all_of(r.features.begin(), r.features.end(),
-                     [](const FeatureValue& f) { return f.verdict == Verdict::kOk; }))
+        !std::all_of(r.features.begin(), r.features.end(), [](const FeatureValue& f) {
+            return f.verdict == Verdict::kOk || (!f.required && f.verdict == Verdict::kNotMeasured);
+        }))
         return core::make_error("result: overall OK but a feature is not OK");
     return {};
 }
