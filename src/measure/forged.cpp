@@ -25,6 +25,8 @@ namespace {
 // Fewer samples than this beyond the plane (fillet and wall): the edge is sharp, or its wall out
 // of view, and the edge brackets measure it.
 constexpr std::int64_t kMinProfileSamples = 200;
+// Below the plane by more than 3σ of the range noise: beyond it (a fillet's or a wall's sample).
+constexpr double kBeyondPlaneMm = 0.15;
 // A fitted fillet smaller than this is a sharp edge: the brackets pin it better than the profile.
 constexpr double kSharpRhoMm = 0.1;
 // Fewer wall samples than this do not fix the wall's draft.
@@ -237,6 +239,12 @@ bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
         const double s_beyond = pass == 0 ? slack : 0.0;
         const auto pts = corner_points(frames, ep, side, m.centre, m.radius, s_in,
                                        s_beyond + 0.5 + prior.t_max * depth, depth);
+        // Nothing beyond the plane (a sharp edge over a wall no sensor of the plane sees: every
+        // edge of an ideal part): the edge brackets, without a profile fit that would say so.
+        if (pass == 0 && std::count_if(pts.begin(), pts.end(), [](const CornerPoint& p) {
+                             return p.h < -kBeyondPlaneMm;
+                         }) < kMinProfileSamples)
+            return false;
         prior.fix_draft = false;
         prior.depth = 0.0;
         fit = fit_corner(pts, side, {m.centre, m.radius, m.t, m.rho}, prior);
