@@ -32,10 +32,14 @@ struct Ortho {
     double de_dt = 0, de_drho = 0, de_drho2 = 0, de_ddepth = 0;
     int where = 0;  // 0 plane, 1 fillet, 2 wall, 3 far fillet, 4 far level
 };
-// Beyond the wall's lower end (a far corner): the concave fillet, centre c2 at rho2 from the wall
-// and from the far level h = −depth, outside the material, then the far level.
+// The far fillet's centre: rho2 from the wall and from the far level h = −depth, outside the
+// material (k = √(1 + t²)).
+Eigen::Vector2d far_centre(const CornerModel& m, double k) {
+    return {m.rho2 * k + m.t * (m.depth - m.rho2), m.rho2 - m.depth};
+}
+// Beyond the wall's lower end (a far corner): the concave fillet about c2, then the far level.
 void far_corner(const CornerModel& m, double k, const Eigen::Vector2d& ps, Ortho& o) {
-    const Eigen::Vector2d c2(m.rho2 * k + m.t * (m.depth - m.rho2), m.rho2 - m.depth);
+    const Eigen::Vector2d c2 = far_centre(m, k);
     if (ps.x() >= c2.x()) {
         o.where = 4;
         o.e = ps.y() + m.depth;
@@ -62,8 +66,7 @@ Ortho ortho(const CornerModel& m, double s, double h) {
     Ortho o;
     // Where the far fillet meets the wall: its centre less rho2 along the wall's normal.
     const auto past_wall = [&] {
-        const Eigen::Vector2d c2(m.rho2 * k + m.t * (m.depth - m.rho2), m.rho2 - m.depth);
-        return m.depth > 0.0 && (ps - (c2 - m.rho2 * n2)).dot(down) >= 0.0;
+        return m.depth > 0.0 && (ps - (far_centre(m, k) - m.rho2 * n2)).dot(down) >= 0.0;
     };
     if (s <= c.x()) {
         o.e = h;
@@ -271,8 +274,8 @@ double corner_residual(const CornerModel& m, double side, const CornerPoint& p, 
 }
 
 CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const CornerModel& start,
-                     const CornerPrior& prior) {
-    // The fit runs on an even thinning to kFitSamples (a corner's five parameters need far fewer
+                     const CornerPrior& prior, bool jackknife) {
+    // The fit runs on an even thinning to kFitSamples (a corner's seven parameters need far fewer
     // than the 10 000-50 000 samples near it; each fitted one stands for `stride`, so u is that
     // of all); inliers and counts are taken on all of them.
     constexpr std::size_t kFitSamples = 6000;
@@ -321,8 +324,9 @@ CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const Cor
     out.u_radius = std::numeric_limits<double>::infinity();  // the samples do not fix it
     if (ldlt.info() == Eigen::Success && ldlt.rcond() > 1e-14) {
         const Mat7 cov = ldlt.solve(Mat7::Identity()) * s.rms * s.rms;
-        out.u_radius = std::max(std::sqrt(std::max(0.0, cov(2, 2))),
-                                jackknife_u(pts, use, side, x, prior, stride));
+        out.u_radius = std::sqrt(std::max(0.0, cov(2, 2)));
+        if (jackknife)
+            out.u_radius = std::max(out.u_radius, jackknife_u(pts, use, side, x, prior, stride));
     }
     return out;
 }

@@ -93,9 +93,11 @@ struct CornerFit {
 // Least squares (Levenberg–Marquardt, 3σ rejection) of the corner profile to the samples. The
 // draft has a weak prior (the middle of the drawing's range, ± the range/√12), so a wall seen
 // too little to fix its own draft costs uncertainty rather than a value. `side`: +1 outer, −1
-// bore. u_radius is infinite when the samples do not fix the model.
+// bore. u_radius is infinite when the samples do not fix the model. `jackknife`: u_radius also
+// from the jackknife over groups of profiles (four more solves); a fit whose u is not reported
+// (a first pass, a probe of the window) goes without.
 CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const CornerModel& start,
-                     const CornerPrior& prior);
+                     const CornerPrior& prior, bool jackknife = true);
 
 // The distance of a sample from the profile, and where it lies (0 plane, 1 fillet, 2 wall, 3 far
 // fillet, 4 far level).

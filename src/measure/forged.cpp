@@ -3,6 +3,7 @@
 // and the corner profile fitted to them about the circle's own centre (corner.cpp).
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 
 #include "corner.hpp"
 #include "edges.hpp"
@@ -184,29 +185,31 @@ std::optional<Draft> wall_draft(const std::vector<const FaceFrame*>& wall_frames
 // 1-3° wall at grazing incidence). Its draft is held at the slope the side faces see, when they
 // see the wall; else, on a short step whose far corner is seen, the wall is the common tangent
 // of its two fillets, which fix its draft; else the draft is held at the drawing's middle. What
-// a held draft may be off goes into u.
+// a held draft may be off goes into u. `jackknife`: as fit_corner's, for the fit returned.
 CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
                           const std::vector<const FaceFrame*>& wall_frames, const EdgePlane& ep,
                           double side, const CornerModel& m, double s_in, double s_beyond,
-                          double depth, double step, CornerPrior& prior) {
+                          double depth, double step, CornerPrior& prior, bool jackknife) {
     const auto d = wall_draft(wall_frames, ep, side, m, depth, prior.t_max);
     if (!d && step > 0.0) {
         // The far fillet and 1.5 mm of the far level in the window; again with 4 mm, for how
-        // much the result leans on the model's shape.
-        const double rho2 = m.rho2 > 0.0 ? m.rho2 : prior.rho_max;
+        // much the result leans on the model's shape. One gathering, the first a part of it.
+        const double s_far =
+            s_beyond + prior.t_max * step + (m.rho2 > 0.0 ? m.rho2 : prior.rho_max);
+        const auto wide =
+            corner_points(frames, ep, side, m.centre, m.radius, s_in, s_far + 4.0, step + 0.5);
+        std::vector<CornerPoint> near;
+        std::copy_if(wide.begin(), wide.end(), std::back_inserter(near), [&](const CornerPoint& p) {
+            return side * ((p.q - m.centre).norm() - m.radius) <= s_far + 1.5;
+        });
         prior.depth = step;
-        std::optional<CornerFit> far;
-        for (const double level_mm : {1.5, 4.0}) {
-            const auto pts =
-                corner_points(frames, ep, side, m.centre, m.radius, s_in,
-                              s_beyond + prior.t_max * step + rho2 + level_mm, step + 0.5);
-            CornerFit f = fit_corner(pts, side, m, prior);
-            if (f.n_far < kMinProfileSamples) break;
-            if (far) {
-                far->u_model = std::abs(f.m.radius - far->m.radius);
-                return *far;
+        CornerFit far = fit_corner(near, side, m, prior, jackknife);
+        if (far.n_far >= kMinProfileSamples) {
+            const CornerFit f = fit_corner(wide, side, m, prior, false);
+            if (f.n_far >= kMinProfileSamples) {
+                far.u_model = std::abs(f.m.radius - far.m.radius);
+                return far;
             }
-            far = f;
         }
         prior.depth = 0.0;
     }
@@ -217,7 +220,7 @@ CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
         prior.t_known = d->t;
         prior.t_known_u = d->u;
     }
-    return fit_corner(pts, side, {m.centre, m.radius, prior.t_mean(), m.rho}, prior);
+    return fit_corner(pts, side, {m.centre, m.radius, prior.t_mean(), m.rho}, prior, jackknife);
 }
 
 bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
@@ -247,7 +250,8 @@ bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
             return false;
         prior.fix_draft = false;
         prior.depth = 0.0;
-        fit = fit_corner(pts, side, {m.centre, m.radius, m.t, m.rho}, prior);
+        // u is reported from the second pass only: the first goes without the jackknife.
+        fit = fit_corner(pts, side, {m.centre, m.radius, m.t, m.rho}, prior, pass == 1);
         // Sharp, or nothing beyond the plane: the edge brackets (decided on the free fit).
         if (fit->n_arc + fit->n_wall < kMinProfileSamples || !fillet_seen(*fit, s_in) ||
             fit->m.rho < kSharpRhoMm)
@@ -256,7 +260,7 @@ bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
             CornerModel start = fit->m;
             start.rho2 = m.rho2;
             fit = fit_hidden_wall(frames, wall_frames, ep, side, start, s_in, s_beyond, depth, step,
-                                  prior);
+                                  prior, pass == 1);
         }
         m = fit->m;
     }

@@ -123,16 +123,16 @@ std::optional<LevelEnd> corner_end(const Context& ctx, const std::string& level,
     std::string no_face;
     const auto ann = ctx.annulus(level, wall.value, frames, no_face);
     if (!ann) return std::nullopt;  // not a face these sensors see: not an error
-    const PlaneResult pl = ctx.level_plane(level, *ann, frames);
+    PlaneResult pl = ctx.level_plane(level, *ann, frames);
     if (!pl.error.empty()) {
         why = pl.error;
         return std::nullopt;
     }
     LevelEnd e;
     e.plane = pl.fit;
-    e.plane_points = pl.points;
     e.ref = on_plane_at(pl.fit, w.radius.mean, w.phi);
     e.u_fit = plane_u_at(pl, e.ref);
+    e.plane_points = std::move(pl.points);
     e.est = {level, "convex corner", {}, e.ref.z(), e.u_fit, pl.fit.n_points};
     return e;
 }
@@ -382,7 +382,7 @@ void height_edges(const Context& ctx, const core::FeatureSpec& f,
         PlaneResult pl[2];
         for (int j = 0; j < 2; ++j) {
             pl[j].fit = *e[j].plane;
-            pl[j].points = e[j].plane_points;
+            pl[j].points = std::move(e[j].plane_points);  // not needed after
         }
         plane_sectors(ctx, pl, r);
     }

@@ -257,14 +257,14 @@ PlaneResult Context::level_plane(const std::string& level, const Annulus& a,
         keep_flat_part(pl, narrow, c, "plane at level '" + level + "'");
     if (pl.error.empty()) {
         const double tilt = std::acos(std::min(1.0, std::abs(pl.fit.normal.z()))) * kRadToDeg;
-        // A narrow forged face whose points fit a steep plane: its fillets and walls, no flat.
-        if (tilt > c.max_plane_tilt_deg && narrow && recipe.forging)
-            pl.error = "plane at level '" + level + "': no flat part between its fillets (" +
-                       "what is seen there fits a surface tilted " + std::to_string(tilt) +
-                       "° from the part axis)";
-        else if (tilt > c.max_plane_tilt_deg)
-            pl.error = "plane at level '" + level + "' is tilted " + std::to_string(tilt) +
-                       "° from the part axis: wrong pose or wrong part";
+        // On a narrow forged face a steep plane is its fillets and walls: no flat part.
+        if (tilt > c.max_plane_tilt_deg)
+            pl.error = narrow && recipe.forging
+                           ? "plane at level '" + level + "': no flat part between its fillets (" +
+                                 "what is seen there fits a surface tilted " +
+                                 std::to_string(tilt) + "° from the part axis)"
+                           : "plane at level '" + level + "' is tilted " + std::to_string(tilt) +
+                                 "° from the part axis: wrong pose or wrong part";
     }
     return pl;
 }
