@@ -38,9 +38,10 @@ const Env& env() {
     return e;
 }
 
-sim::SimResult simulate(const sim::CellConfig& cell, std::uint64_t seed) {
+sim::SimResult simulate(const sim::CellConfig& cell, std::uint64_t seed, bool forged = false) {
     sim::SimOptions o;
     o.seed = seed;
+    o.forged = forged;
     o.temperature_c = 1000.0;
     o.t0_ns = 1'790'000'000'000'000'000;
     auto s = sim::simulate(env().recipe, cell, o);
@@ -729,9 +730,13 @@ TEST(CompensatedMeasurement, LostDatagramsNeverMakeAGoodPartNok) {
 
 // The daemon runs the pipeline in steps (pipeline::PartRun): the pose and the other faces'
 // features while the last face's accelerometer margin is still arriving, the last face after.
-// It must give exactly what the offline tool's run() gives on the finished recording.
-TEST(PartRun, InStepsWithAGrowingRecordIsExactlyRun) {
-    const auto s = simulate(env().cell, 16);
+// It must give exactly what the offline tool's run() gives on the finished recording: on an
+// ideal part, whose diameters are measured before the side faces are in, and on a forged one,
+// whose corners take their draft from the side faces and are measured again once they are in.
+class PartRunSteps : public ::testing::TestWithParam<bool> {};
+INSTANTIATE_TEST_SUITE_P(IdealAndForged, PartRunSteps, ::testing::Bool());
+TEST_P(PartRunSteps, InStepsWithAGrowingRecordIsExactlyRun) {
+    const auto s = simulate(env().cell, 16, GetParam());
     const auto whole = pipeline::run(s.recording, env().recipe, {});
     ASSERT_TRUE(whole.match && whole.match->found);
     core::Recording growing = s.recording;  // as the daemon has it at the last profile
@@ -755,8 +760,15 @@ TEST(PartRun, InStepsWithAGrowingRecordIsExactlyRun) {
         EXPECT_EQ(a.hot_mm, b.hot_mm) << a.name;  // bit for bit
         EXPECT_EQ(a.verdict, b.verdict) << a.name;
         EXPECT_EQ(a.u_mm, b.u_mm) << a.name;
+        EXPECT_EQ(a.method, b.method) << a.name;
+        EXPECT_EQ(a.reason, b.reason) << a.name;
     }
     EXPECT_EQ(steps.warnings, whole.warnings);
+    // The forged part's corners did look to the side faces (else the test proves nothing).
+    const auto& fs = whole.measurement.features;
+    EXPECT_EQ(GetParam(), std::any_of(fs.begin(), fs.end(), [](const measure::FeatureResult& f) {
+                  return f.wall_faces_used;
+              }));
 }
 
 // A master whose certified features could only be measured degraded is not checked on them:

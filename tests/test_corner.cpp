@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <random>
 
@@ -190,11 +191,13 @@ TEST(CornerProfile, AStepsTwoFilletsFixTheDraftOfAWallNotSeen) {
             EXPECT_NEAR(fit.m.depth, truth.depth, 1e-4);
             continue;
         }
-        // σ 0.05 mm: the along-ray compromise reads this corner about 6 µm small (corner.cpp).
+        // σ 0.05 mm: 2 µm large on the mean of the 9 (6 µm small while grazing rays fell back
+        // to the bare orthogonal distance, corner.cpp).
         EXPECT_NEAR(fit.m.radius, truth.radius, 0.015);
         EXPECT_NEAR(std::atan(fit.m.t) / kDeg, 2.8, 0.4);
         mean_error += (fit.m.radius - truth.radius) / 9.0;
     }
+    std::printf("step corner, 9 noisy trials: mean radius error %+.4f mm\n", mean_error);
     EXPECT_LT(std::abs(mean_error), 0.01);
 }
 

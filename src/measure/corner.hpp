@@ -84,6 +84,9 @@ struct CornerFit {
     // What the radius moves by when the model's window moves (a far corner: the far level taken
     // 1.5 or 4 mm beyond its fillet): its shape is not quite the drawing's. 0 when not tried.
     double u_model = 0;
+    // What the radius moves by with the orthogonal distance instead of the distance along the
+    // ray (a step's two fillets: the steep parts' weighting). 0 when not tried.
+    double u_estimator = 0;
     double rms = 0;
     std::int64_t n_wall = 0, n_arc = 0, n_plane = 0;  // inliers by the part of the profile
     std::int64_t n_far = 0;                           // on the far fillet and the far level
@@ -103,15 +106,30 @@ CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const Cor
 // fillet, 4 far level).
 double corner_residual(const CornerModel& m, double side, const CornerPoint& p, int* part);
 
+// A corner as its plane's faces give it, kept while the faces that see its wall come in (the
+// daemon measures a diameter as soon as its first face is in: PartMeasurer), so that they cost
+// only the refit with their draft. Valid for one set of plane faces.
+struct CornerMemo {
+    bool fitted = false;    // the plane's faces were fitted
+    bool brackets = false;  // nothing beyond the plane, or a sharp edge: the edge brackets
+    CornerFit fit;          // the free fit, the corner when its wall was seen
+    CornerPrior prior;
+    // The wall out of the plane's faces' view: the corner refitted from `start` (the last free
+    // fit) with a held draft, in the window (s_in, s_beyond, depth; step: a short step's depth).
+    bool wall_unseen = false;
+    CornerModel start;
+    double s_in = 0, s_beyond = 0, depth = 0, step = 0;
+};
+
 // Diameter `f` at its theoretical sharp corner when its edge is filleted or its wall seen: the
 // corner profile fitted on the samples of its plane, fillet and wall (recipes with a forging
 // drawing). Returns false, leaving `r` as it was, when nothing beyond the plane is seen (a sharp
 // edge over a wall out of view): the edge brackets measure that corner. `side`: +1 outer edge.
 // `wall_frames`: faces that see the wall broadside but not the plane (side scans), for the draft
-// when the plane's faces do not see the wall.
+// when the plane's faces do not see the wall. `memo`: what `frames` gave, computed when empty.
 bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
                      const std::vector<const FaceFrame*>& frames,
                      const std::vector<const FaceFrame*>& wall_frames, const EdgePlane& ep,
-                     double side, FeatureResult& r);
+                     double side, FeatureResult& r, CornerMemo& memo);
 
 }  // namespace hotgauge::measure::detail

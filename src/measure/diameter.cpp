@@ -216,22 +216,28 @@ std::optional<EdgePlane> edge_plane(const Context& ctx, const core::FeatureSpec&
 
 }  // namespace
 
+bool sees_edge_plane(const Context& ctx, const core::FeatureSpec& f, const FaceFrame& frame) {
+    std::string unused;
+    const double R = 0.5 * ctx.recipe.section(f.section)->diameter_mm;
+    return ctx.annulus(f.edge_at, R, {&frame}, unused).has_value();
+}
+
 void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
-                      const std::vector<const FaceFrame*>& all, FeatureResult& r) {
+                      const std::vector<const FaceFrame*>& all, FeatureResult& r,
+                      CornerMemo* memo) {
     const double R = 0.5 * ctx.recipe.section(f.section)->diameter_mm;
     // A forging's recipe may add faces that see the wall broadside (the side scans): its draft
     // comes from them; the edge's level from the faces that see its plane.
     std::vector<const FaceFrame*> frames, wall_frames;
-    std::string unused;
     for (const auto* fr : all)
-        (!ctx.recipe.forging || ctx.annulus(f.edge_at, R, {fr}, unused) ? frames : wall_frames)
-            .push_back(fr);
+        (!ctx.recipe.forging || sees_edge_plane(ctx, f, *fr) ? frames : wall_frames).push_back(fr);
     if (frames.empty()) frames = all;  // none sees it: the reason names them
     bool plane_inside = false;
     const auto ep = edge_plane(ctx, f, frames, R, plane_inside, r.reason);
     if (!ep) return;
-    if (ctx.recipe.forging &&
-        corner_diameter(ctx, f, frames, wall_frames, *ep, plane_inside ? 1.0 : -1.0, r))
+    CornerMemo own;
+    if (ctx.recipe.forging && corner_diameter(ctx, f, frames, wall_frames, *ep,
+                                              plane_inside ? 1.0 : -1.0, r, memo ? *memo : own))
         return;
     const double R_e = ctx.ex.z(R), win = ctx.ex.tol(ctx.c.edge_window_mm, R);
     std::vector<Eigen::Vector2d> coarse;

@@ -11,9 +11,16 @@
 
 namespace hotgauge::measure::detail {
 
-// Diameter of the circular edge where `f.section`'s wall meets the level `f.edge_at`.
+struct CornerMemo;  // corner.hpp
+
+// Diameter of the circular edge where `f.section`'s wall meets the level `f.edge_at`. `memo`: a
+// forging's corner as the faces that see its plane gave it, kept between calls (or nullptr).
 void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
-                      const std::vector<const FaceFrame*>& frames, FeatureResult& r);
+                      const std::vector<const FaceFrame*>& frames, FeatureResult& r,
+                      CornerMemo* memo = nullptr);
+
+// Whether `frame` sees the plane of a diameter's edge (else, on a forging, only its wall).
+bool sees_edge_plane(const Context& ctx, const core::FeatureSpec& f, const FaceFrame& frame);
 
 // Height between two levels, each end by the best estimator its faces allow (planes where the
 // level's face is seen, corners and silhouette edges where it is not).

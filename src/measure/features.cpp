@@ -4,8 +4,10 @@
 #include "hotgauge/measure/features.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
+#include "corner.hpp"
 #include "feature_kinds.hpp"
 #include "frame.hpp"
 #include "hotgauge/core/parallel.hpp"
@@ -22,7 +24,7 @@ constexpr double kMaxTemperatureC = 1600.0;
 using FrameRefs = std::map<std::string, const detail::FaceFrame*>;
 
 void measure_one(const detail::Context& ctx, const FrameRefs& frames, const FeatureSpec& f,
-                 FeatureResult& r) {
+                 FeatureResult& r, detail::CornerMemo* memo = nullptr) {
     std::vector<const detail::FaceFrame*> used;
     for (const auto& name : f.faces) {
         auto it = frames.find(name);
@@ -39,7 +41,7 @@ void measure_one(const detail::Context& ctx, const FrameRefs& frames, const Feat
         return;
     }
     if (f.kind == core::FeatureKind::kDiameter)
-        detail::measure_diameter(ctx, f, used, r);
+        detail::measure_diameter(ctx, f, used, r, memo);
     else if (f.kind == core::FeatureKind::kHeight)
         detail::measure_height(ctx, f, used, r);
     // a die shift comes from the diameters' circles, once they are all measured (finish)
@@ -222,6 +224,14 @@ struct PartMeasurer::Impl {
     std::map<std::string, detail::FaceFrame> frames, frames_all;
     FaceUntrusted untrusted;
     std::vector<std::optional<FeatureResult>> measured;  // per recipe feature, once measured
+    // A forging's diameter is measured as soon as its first face is in: the others see only its
+    // wall, which the corner may not need (every edge of an ideal part), so the daemon need not
+    // wait for the last face. Per feature, its faces not in then; measured again when one of
+    // them comes in and sees the edge's plane, or when the corner looked to the wall's faces.
+    std::vector<std::vector<std::string>> early_without;
+    // Per feature, its corner from the faces that see its plane, without and with their
+    // untrusted profiles: kept while only faces that see its wall come in.
+    std::vector<std::array<detail::CornerMemo, 2>> memos;
 
     Impl(const core::Recipe& recipe, const core::Recording& r,
          const Eigen::Isometry3d& T_world_part, const MeasureConfig& config)
@@ -230,7 +240,9 @@ struct PartMeasurer::Impl {
           ctx{recipe, core::AxisymmetricSolid::from_recipe(recipe),
               expect(recipe, r, config, growth), for_recipe(recipe, config)},
           bounds(part_bounds(ctx)),
-          measured(recipe.features.size()) {}
+          measured(recipe.features.size()),
+          early_without(recipe.features.size()),
+          memos(recipe.features.size()) {}
 
     FrameRefs refs(const FeatureSpec& f, bool with_untrusted) const {
         FrameRefs out;
@@ -243,23 +255,52 @@ struct PartMeasurer::Impl {
         }
         return out;
     }
+    static bool early(const core::Recipe& recipe, const FeatureSpec& f) {
+        return recipe.forging && f.kind == core::FeatureKind::kDiameter && !f.faces.empty();
+    }
     bool ready(const FeatureSpec& f) const {
+        if (early(ctx.recipe, f)) return frames.contains(f.faces[0]);
         return std::all_of(f.faces.begin(), f.faces.end(),
                            [&](const std::string& n) { return frames.contains(n); });
     }
-    FeatureResult measure_feature(const FeatureSpec& f) const;
+    std::vector<std::string> not_in(const FeatureSpec& f) const {
+        std::vector<std::string> out;
+        for (const auto& n : f.faces)
+            if (!frames.contains(n)) out.push_back(n);
+        return out;
+    }
+    void recheck_early(std::size_t i);
+    FeatureResult measure_feature(std::size_t i);
 };
+
+// An early diameter once more of its faces are in: kept when none of them sees the edge's plane
+// and the corner did not look to the wall's faces (the value is then what all faces give).
+void PartMeasurer::Impl::recheck_early(std::size_t i) {
+    const FeatureSpec& f = ctx.recipe.features[i];
+    auto& missing = early_without[i];
+    const auto sees = [&](const auto& map, const std::string& name) {
+        auto it = map.find(name);
+        return it != map.end() && detail::sees_edge_plane(ctx, f, it->second);
+    };
+    for (const auto& name : missing) {
+        if (!frames.contains(name)) continue;
+        if (sees(frames, name) || sees(frames_all, name)) memos[i] = {};  // new plane faces
+        if (measured[i]->wall_faces_used || !memos[i][0].fitted) measured[i].reset();
+    }
+    std::erase_if(missing, [&](const std::string& n) { return frames.contains(n); });
+}
 
 // A feature measured without the untrusted profiles of its faces; when it relies on them (not
 // measurable without them, or less than kMinTrustedShare of its points left), measured with
 // them and degraded; not measurable with them either: the full data's reason.
-FeatureResult PartMeasurer::Impl::measure_feature(const FeatureSpec& f) const {
+FeatureResult PartMeasurer::Impl::measure_feature(std::size_t i) {
+    const FeatureSpec& f = ctx.recipe.features[i];
     FeatureResult r = skeleton(f);
-    measure_one(ctx, refs(f, false), f, r);
+    measure_one(ctx, refs(f, false), f, r, &memos[i][0]);
     r.left_out = untrusted_of(f, untrusted);
     if (r.left_out.empty()) return r;
     FeatureResult again = skeleton(f);
-    measure_one(ctx, refs(f, true), f, again);
+    measure_one(ctx, refs(f, true), f, again, &memos[i][1]);
     // Per end too: a height's one small end may lose most of its points to them.
     const auto few = [](std::int64_t left, std::int64_t all) {
         return static_cast<double>(left) < kMinTrustedShare * static_cast<double>(all);
@@ -268,6 +309,8 @@ FeatureResult PartMeasurer::Impl::measure_feature(const FeatureSpec& f) const {
     if (r.hot_mm && again.hot_mm && r.ends.size() == again.ends.size())
         for (std::size_t j = 0; j < r.ends.size(); ++j)
             thin = thin || few(r.ends[j].n_points, again.ends[j].n_points);
+    r.wall_faces_used = r.wall_faces_used || again.wall_faces_used;
+    again.wall_faces_used = r.wall_faces_used;
     if (r.hot_mm && !thin) {  // measured around them
         if (silhouette(r) || across_faces(r)) {
             r.degraded = true;
@@ -310,13 +353,16 @@ void PartMeasurer::add_faces(std::size_t first, std::size_t end, const core::Fac
         (jobs[j].second ? m.frames_all : m.frames).insert_or_assign(name, std::move(prepared[j]));
         if (jobs[j].second) m.untrusted[name] = *find(untrusted, name);
     }
-    // Every feature whose faces are all in: independent of each other, over the cores.
+    // Every feature whose faces are in: independent of each other, over the cores.
     std::vector<std::size_t> ready;
-    for (std::size_t i = 0; i < m.measured.size(); ++i)
+    for (std::size_t i = 0; i < m.measured.size(); ++i) {
+        if (m.measured[i] && !m.early_without[i].empty()) m.recheck_early(i);
         if (!m.measured[i] && m.ready(m.ctx.recipe.features[i])) ready.push_back(i);
+    }
     core::parallel_for(ready.size(), m.ctx.c.threads, [&](std::size_t j, unsigned) {
-        m.measured[ready[j]] = m.measure_feature(m.ctx.recipe.features[ready[j]]);
+        m.measured[ready[j]] = m.measure_feature(ready[j]);
     });
+    for (std::size_t i : ready) m.early_without[i] = m.not_in(m.ctx.recipe.features[i]);
 }
 
 PartMeasurement PartMeasurer::finish() {

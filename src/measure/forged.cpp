@@ -23,13 +23,21 @@ Eigen::Vector2d EdgePlane::axis2d() const {
 
 namespace {
 
+// Where the corner may be: the window of a sorting gauge and the die shift about the axis.
+double corner_slack(const Context& ctx, double R_e) {
+    return ctx.ex.tol(ctx.c.edge_window_mm, R_e) * 0.5 + ctx.recipe.forging->die_shift_mm;
+}
+
 // Fewer samples than this beyond the plane (fillet and wall): the edge is sharp, or its wall out
 // of view, and the edge brackets measure it.
 constexpr std::int64_t kMinProfileSamples = 200;
 // Below the plane by more than 3σ of the range noise: beyond it (a fillet's or a wall's sample).
 constexpr double kBeyondPlaneMm = 0.15;
-// A fitted fillet smaller than this is a sharp edge: the brackets pin it better than the profile.
-constexpr double kSharpRhoMm = 0.1;
+// A fitted fillet smaller than this, or than kSharpRhoNoise times the profile's scatter, is a
+// sharp edge: the brackets pin it better than the profile. Within a few σ of the range noise a
+// fillet cannot be told from the noise below a sharp edge's plane (an ideal part at σ 0.1 mm:
+// a "fillet" of 0.3-0.4 mm fitted to it put the corner 0.13 mm out).
+constexpr double kSharpRhoMm = 0.1, kSharpRhoNoise = 5.0;
 // Fewer wall samples than this do not fix the wall's draft.
 constexpr std::int64_t kMinWallSamples = 150;
 // The profile's samples scatter by the range noise (0.05 mm); far more is not this corner.
@@ -181,107 +189,131 @@ std::optional<Draft> wall_draft(const std::vector<const FaceFrame*>& wall_frames
 
 }  // namespace
 
-// The corner of a wall seen too little to fix its own draft (top and bottom sensors lose a
-// 1-3° wall at grazing incidence). Its draft is held at the slope the side faces see, when they
-// see the wall; else, on a short step whose far corner is seen, the wall is the common tangent
-// of its two fillets, which fix its draft; else the draft is held at the drawing's middle. What
-// a held draft may be off goes into u. `jackknife`: as fit_corner's, for the fit returned.
+// The corner of a wall the plane's faces see too little to fix its draft (top and bottom
+// sensors lose a 1-3° wall at grazing incidence), from their last free fit. Its draft is held at
+// the slope the side faces see, when they see the wall; else, on a short step whose far corner
+// is seen, the wall is the common tangent of its two fillets, which fix its draft; else the draft
+// is held at the drawing's middle. What a held draft may be off goes into u.
 CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
                           const std::vector<const FaceFrame*>& wall_frames, const EdgePlane& ep,
-                          double side, const CornerModel& m, double s_in, double s_beyond,
-                          double depth, double step, CornerPrior& prior, bool jackknife) {
+                          double side, const CornerMemo& memo, CornerPrior& prior) {
+    const CornerModel& m = memo.start;
+    const double depth = memo.depth, step = memo.step;
     const auto d = wall_draft(wall_frames, ep, side, m, depth, prior.t_max);
     if (!d && step > 0.0) {
         // The far fillet and 1.5 mm of the far level in the window; again with 4 mm, for how
         // much the result leans on the model's shape. One gathering, the first a part of it.
         const double s_far =
-            s_beyond + prior.t_max * step + (m.rho2 > 0.0 ? m.rho2 : prior.rho_max);
+            memo.s_beyond + prior.t_max * step + (m.rho2 > 0.0 ? m.rho2 : prior.rho_max);
         const auto wide =
-            corner_points(frames, ep, side, m.centre, m.radius, s_in, s_far + 4.0, step + 0.5);
+            corner_points(frames, ep, side, m.centre, m.radius, memo.s_in, s_far + 4.0, step + 0.5);
         std::vector<CornerPoint> near;
         std::copy_if(wide.begin(), wide.end(), std::back_inserter(near), [&](const CornerPoint& p) {
             return side * ((p.q - m.centre).norm() - m.radius) <= s_far + 1.5;
         });
         prior.depth = step;
-        CornerFit far = fit_corner(near, side, m, prior, jackknife);
+        CornerFit far = fit_corner(near, side, m, prior);
         if (far.n_far >= kMinProfileSamples) {
             const CornerFit f = fit_corner(wide, side, m, prior, false);
             if (f.n_far >= kMinProfileSamples) {
                 far.u_model = std::abs(f.m.radius - far.m.radius);
+                // The same samples with the orthogonal distance: how much the steep fillets'
+                // weighting moves the corner, which two fillets far apart amplify.
+                std::vector<CornerPoint> ortho_pts = near;
+                for (auto& p : ortho_pts) p.ray.setZero();
+                const CornerFit o = fit_corner(ortho_pts, side, far.m, prior, false);
+                far.u_estimator = std::abs(o.m.radius - far.m.radius);
                 return far;
             }
         }
         prior.depth = 0.0;
     }
-    const auto pts = corner_points(frames, ep, side, m.centre, m.radius, s_in,
-                                   s_beyond + 0.5 + prior.t_max * depth, depth);
+    const auto pts = corner_points(frames, ep, side, m.centre, m.radius, memo.s_in,
+                                   memo.s_beyond + 0.5 + prior.t_max * depth, depth);
     prior.fix_draft = true;
     if (d) {
         prior.t_known = d->t;
         prior.t_known_u = d->u;
     }
-    return fit_corner(pts, side, {m.centre, m.radius, prior.t_mean(), m.rho}, prior, jackknife);
+    return fit_corner(pts, side, {m.centre, m.radius, prior.t_mean(), m.rho}, prior);
+}
+
+// The corner's free fit on its plane's faces (they see the plane, the fillet and perhaps the
+// wall): wide around the expected circle, then tight around the fitted one. Nothing beyond the
+// plane, or a sharp edge: `brackets`, for the edge brackets. A wall they do not see is left to
+// fit_hidden_wall, once the faces that may see it are in.
+CornerMemo plane_faces_corner(const Context& ctx, const core::FeatureSpec& f,
+                              const std::vector<const FaceFrame*>& frames, const EdgePlane& ep,
+                              double side) {
+    CornerMemo out;
+    out.fitted = true;
+    CornerPrior& prior = out.prior;
+    prior = {std::tan(ctx.recipe.draft_of(f.section) / kRadToDeg), ctx.recipe.fillet_at(f.edge_at)};
+    out.step = step_depth(ctx, f, side);
+    out.depth = wall_depth(ctx, f);
+    const double R_e = ctx.ex.z(0.5 * ctx.recipe.section(f.section)->diameter_mm);
+    const double slack = corner_slack(ctx, R_e);
+    CornerModel m{ep.axis2d(), R_e, 0.5 * prior.t_max, 0.5 * prior.rho_max};
+    std::vector<CornerPoint> pts;
+    for (int pass = 0; pass < 2; ++pass) {
+        out.s_in = pass == 0 ? prior.rho_max + 1.0 + slack : m.rho + 1.5;
+        out.s_beyond = pass == 0 ? slack : 0.0;
+        pts = corner_points(frames, ep, side, m.centre, m.radius, out.s_in,
+                            out.s_beyond + 0.5 + prior.t_max * out.depth, out.depth);
+        // Nothing beyond the plane (a sharp edge over a wall no sensor of the plane sees: every
+        // edge of an ideal part): the edge brackets, without a profile fit that would say so.
+        out.brackets = pass == 0 && std::count_if(pts.begin(), pts.end(), [](const CornerPoint& p) {
+                                        return p.h < -kBeyondPlaneMm;
+                                    }) < kMinProfileSamples;
+        if (out.brackets) return out;
+        out.fit = fit_corner(pts, side, {m.centre, m.radius, m.t, m.rho}, prior, false);
+        // Sharp, or nothing beyond the plane: the edge brackets (decided on the free fit).
+        out.brackets = out.fit.n_arc + out.fit.n_wall < kMinProfileSamples ||
+                       !fillet_seen(out.fit, out.s_in) ||
+                       out.fit.m.rho < std::max(kSharpRhoMm, kSharpRhoNoise * out.fit.rms);
+        if (out.brackets) return out;
+        m = out.fit.m;
+    }
+    out.start = m;
+    out.wall_unseen = out.fit.n_wall < kMinWallSamples;
+    // Its own wall seen: the free fit is the corner, with the jackknife's u (from the solution,
+    // the fit takes a step or two).
+    if (!out.wall_unseen) out.fit = fit_corner(pts, side, m, prior);
+    return out;
 }
 
 bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
                      const std::vector<const FaceFrame*>& frames,
                      const std::vector<const FaceFrame*>& wall_frames, const EdgePlane& ep,
-                     double side, FeatureResult& r) {
-    const core::ForgingSpec& forging = *ctx.recipe.forging;
-    CornerPrior prior{std::tan(ctx.recipe.draft_of(f.section) / kRadToDeg),
-                      ctx.recipe.fillet_at(f.edge_at)};
-    const double depth = wall_depth(ctx, f), step = step_depth(ctx, f, side);
+                     double side, FeatureResult& r, CornerMemo& memo) {
+    if (!memo.fitted) memo = plane_faces_corner(ctx, f, frames, ep, side);
+    if (memo.brackets) return false;
     const double R_e = ctx.ex.z(0.5 * ctx.recipe.section(f.section)->diameter_mm);
-    // Where the corner may be: the window of a sorting gauge and the die shift about the axis.
-    const double slack = ctx.ex.tol(ctx.c.edge_window_mm, R_e) * 0.5 + forging.die_shift_mm;
-    CornerModel m{ep.axis2d(), R_e, 0.5 * prior.t_max, 0.5 * prior.rho_max};
-    std::optional<CornerFit> fit;
-    // Wide around the expected circle, then tight around the fitted one.
-    for (int pass = 0; pass < 2; ++pass) {
-        const double s_in = pass == 0 ? prior.rho_max + 1.0 + slack : m.rho + 1.5;
-        const double s_beyond = pass == 0 ? slack : 0.0;
-        const auto pts = corner_points(frames, ep, side, m.centre, m.radius, s_in,
-                                       s_beyond + 0.5 + prior.t_max * depth, depth);
-        // Nothing beyond the plane (a sharp edge over a wall no sensor of the plane sees: every
-        // edge of an ideal part): the edge brackets, without a profile fit that would say so.
-        if (pass == 0 && std::count_if(pts.begin(), pts.end(), [](const CornerPoint& p) {
-                             return p.h < -kBeyondPlaneMm;
-                         }) < kMinProfileSamples)
-            return false;
-        prior.fix_draft = false;
-        prior.depth = 0.0;
-        // u is reported from the second pass only: the first goes without the jackknife.
-        fit = fit_corner(pts, side, {m.centre, m.radius, m.t, m.rho}, prior, pass == 1);
-        // Sharp, or nothing beyond the plane: the edge brackets (decided on the free fit).
-        if (fit->n_arc + fit->n_wall < kMinProfileSamples || !fillet_seen(*fit, s_in) ||
-            fit->m.rho < kSharpRhoMm)
-            return false;
-        if (fit->n_wall < kMinWallSamples) {
-            CornerModel start = fit->m;
-            start.rho2 = m.rho2;
-            fit = fit_hidden_wall(frames, wall_frames, ep, side, start, s_in, s_beyond, depth, step,
-                                  prior, pass == 1);
-        }
-        m = fit->m;
-    }
-    if (const std::string why = refusal(*fit, prior, R_e, slack, ep.axis2d()); !why.empty()) {
+    const double slack = corner_slack(ctx, R_e);
+    CornerPrior prior = memo.prior;
+    r.wall_faces_used = memo.wall_unseen;
+    const CornerFit fit =
+        memo.wall_unseen ? fit_hidden_wall(frames, wall_frames, ep, side, memo, prior) : memo.fit;
+    const CornerModel& m = fit.m;
+    if (const std::string why = refusal(fit, prior, R_e, slack, ep.axis2d()); !why.empty()) {
         r.reason = "corner of '" + f.section + "' at '" + f.edge_at + "': " + why;
         return true;
     }
     r.hot_mm = 2.0 * m.radius;
-    r.u_budget = {{"fit", 2.0 * fit->u_radius}, {"compensation", ep.profile_scatter}};
-    if (fit->u_model > 0.0) r.u_budget.emplace_back("model", 2.0 * fit->u_model);
+    r.u_budget = {{"fit", 2.0 * fit.u_radius}, {"compensation", ep.profile_scatter}};
+    if (fit.u_model > 0.0) r.u_budget.emplace_back("model", 2.0 * fit.u_model);
+    if (fit.u_estimator > 0.0) r.u_budget.emplace_back("estimator", 2.0 * fit.u_estimator);
 
-    r.fit_rms_mm = fit->rms;
-    r.n_points = fit->n_arc + fit->n_wall;
+    r.fit_rms_mm = fit.rms;
+    r.n_points = fit.n_arc + fit.n_wall;
     // The draft's own uncertainty is in the fit's (the prior's row of the normal matrix).
     r.method = prior.depth > 0.0  ? "corner profile, draft from the step's two fillets"
                : !prior.fix_draft ? "corner profile"
                : prior.t_known    ? "corner profile, draft from the side faces"
                                   : "corner profile, draft from the drawing";
-    r.arc_deg = 45.0 * static_cast<double>(fit->sector_radius.size());
-    r.n_sectors = static_cast<int>(fit->sector_radius.size());
-    if (fit->sector_radius.size() >= 2) r.sector_spread_mm = 2.0 * sample_std(fit->sector_radius);
+    r.arc_deg = 45.0 * static_cast<double>(fit.sector_radius.size());
+    r.n_sectors = static_cast<int>(fit.sector_radius.size());
+    if (fit.sector_radius.size() >= 2) r.sector_spread_mm = 2.0 * sample_std(fit.sector_radius);
     add_sector_term(r);
     r.ends.push_back({f.edge_at, "corner profile", f.faces, m.radius, 0.5 * r.u_mm, r.n_points});
     r.centre_mm = ep.plane.point + m.centre.x() * ep.e1 + m.centre.y() * ep.e2;

@@ -15,7 +15,10 @@ Alternative in the same run: the offline tool on the same data, `hotgauge measur
 part's archived recording (a separate process reading the recording and building the model,
 as a line integrator would glue `grab` and `measure`); ratio = its wall time / our processing.
 
-    /usr/bin/python3 daemon_latency.py BUILD_DIR [--parts 5]
+    /usr/bin/python3 daemon_latency.py BUILD_DIR [--parts 5] [--forged]
+
+--forged: the parts as forged (draft, fillets, die shift; `simulate --forged`), whose corners are
+fitted as profiles and take their draft from the side scans, the last face among them.
 """
 import argparse
 import json
@@ -37,9 +40,11 @@ def main():
     ap.add_argument("bin_dir")
     ap.add_argument("--parts", type=int, default=5)
     ap.add_argument("--address", default="127.0.0.5")
+    ap.add_argument("--forged", action="store_true")
     a = ap.parse_args()
     workdir = tempfile.mkdtemp(prefix="hotgauge-latency-")
-    line = vl.Line(a.bin_dir, workdir, a.address, seed=21, archive_every_nth_ok=1)
+    line = vl.Line(a.bin_dir, workdir, a.address, seed=21, archive_every_nth_ok=1,
+                   forged=a.forged)
     try:
         line.start()
         plc, conveyor = vl.Plc(line.plc_port), vl.Conveyor(line.axis_port)

@@ -103,6 +103,9 @@ struct FeatureResult {
     std::vector<EdgeEstimate> ends;  // heights: from, to; diameters: the edge
     // Diameters: the circle's own centre (hot, part frame), for the die shift.
     std::optional<Eigen::Vector3d> centre_mm;
+    // A forging's diameter whose corner looked to the faces that see its wall for the draft
+    // (PartMeasurer: measured again when more of them come in).
+    bool wall_faces_used = false;
 };
 
 struct PartMeasurement {
