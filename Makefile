@@ -104,7 +104,8 @@ demo: build
 	/usr/bin/python3 tests/virtual_line.py --bin-dir $(BUILD) --parts 12 --commission 1 --master-at 6 \
 	  --forged --bad-parts 2 --out $(DEMO_OUT)
 
-# The fault soak (issue 18, tests/soak.py): the virtual line for SOAK_PARTS parts with faults on
+# The plant-data outage at full length (30 parts; make test runs 8), then the fault soak (issue
+# 18, tests/soak.py): the virtual line for SOAK_PARTS parts with faults on
 # a seeded schedule (accelerometer loss and outage, camera packet loss and restarts, PLC
 # disconnects, a full results disk, SIGHUP with a bad and a good config, kill -9 of hotgauged
 # with a supervisor that restarts it like systemd), then the report: parts in, results out, lost,
@@ -116,6 +117,7 @@ SOAK_SEED ?= 1
 SOAK_LINES ?= 3
 SOAK_OUT ?= out/soak
 soak: build
+	/usr/bin/python3 tests/plant_data_test.py $(BUILD) --outage-parts 30
 	/usr/bin/python3 tests/soak.py --bin-dir $(BUILD) --parts $(SOAK_PARTS) --seed $(SOAK_SEED) \
 	  --lines $(SOAK_LINES) --out $(SOAK_OUT)
 

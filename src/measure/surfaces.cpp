@@ -247,12 +247,19 @@ std::optional<Annulus> Context::annulus(const std::string& level, double R,
 PlaneResult Context::level_plane(const std::string& level, const Annulus& a,
                                  const std::vector<const FaceFrame*>& frames) const {
     const double z = level_z(level);
-    const double m = c.support_margin_mm;
+    // A face narrower than its two largest fillets and a millimetre has no flat part by drawing.
+    const bool narrow = (a.hi - a.lo) < 2.0 * recipe.fillet_at(level) + 1.0;
+    // A wider one's fillets are left out by drawing: its flat part starts at most the drawing's
+    // largest fillet (and the dimensions' scatter) from each corner. Their tails, each within the
+    // bins' noise of the plane, had pulled the boss top 13 µm towards the material on a forged
+    // part (Height 4 read 0.0075 mm small on the mean), and its recess corner with it.
+    constexpr double kScatterMm = 0.25;
+    const double m = recipe.forging && !narrow
+                         ? std::max(c.support_margin_mm, recipe.fillet_at(level) + kScatterMm)
+                         : c.support_margin_mm;
     PlaneResult pl =
         fit_level_plane(frames, ex.z(z), ex.tol(c.plane_band_mm, z), ex.z(a.lo) + ex.tol(m, a.lo),
                         ex.z(a.hi) - ex.tol(m, a.hi), c, "plane at level '" + level + "'");
-    // A face narrower than its two largest fillets and a millimetre has no flat part by drawing.
-    const bool narrow = (a.hi - a.lo) < 2.0 * recipe.fillet_at(level) + 1.0;
     if (pl.error.empty() && recipe.forging)
         keep_flat_part(pl, narrow, c, "plane at level '" + level + "'");
     if (pl.error.empty()) {
