@@ -771,6 +771,36 @@ TEST_P(PartRunSteps, InStepsWithAGrowingRecordIsExactlyRun) {
               }));
 }
 
+// PartMeasurer with any grouping of the faces gives measure_part's numbers: a forging's diameter
+// measured once its first face is in, then again when its side faces come, one by one or both at
+// once.
+TEST_P(PartRunSteps, AnyGroupingOfTheFacesIsMeasurePart) {
+    const auto s = simulate(env().cell, 16, GetParam());
+    const auto whole = pipeline::run(s.recording, env().recipe, {});
+    ASSERT_TRUE(whole.match && whole.match->found);
+    const Eigen::Isometry3d& T = whole.match->T_world_part;
+    const auto& u = whole.displacement_mm;
+    const auto all = measure::measure_part(env().recipe, s.recording, T, u);
+    ASSERT_EQ(s.recording.faces.size(), 4u);
+    for (const std::vector<std::size_t>& ends :
+         {std::vector<std::size_t>{1, 2, 4}, {1, 2, 3, 4}, {2, 3, 4}, {3, 4}}) {
+        measure::PartMeasurer m(env().recipe, s.recording, T);
+        std::size_t first = 0;
+        for (const std::size_t end : ends) {
+            m.add_faces(first, end, u, {});
+            first = end;
+        }
+        const auto steps = m.finish();
+        ASSERT_EQ(steps.features.size(), all.features.size());
+        for (std::size_t j = 0; j < all.features.size(); ++j) {
+            const auto &a = steps.features[j], &b = all.features[j];
+            EXPECT_EQ(a.hot_mm, b.hot_mm) << a.name << " after " << ends.size() << " groups";
+            EXPECT_EQ(a.u_mm, b.u_mm) << a.name;
+            EXPECT_EQ(a.method, b.method) << a.name;
+        }
+    }
+}
+
 // A master whose certified features could only be measured degraded is not checked on them:
 // the check fails as inconclusive (the PLC reads degraded, not NOK), naming why.
 TEST(CompensateBadInput, AMasterMeasuredDegradedIsInconclusive) {

@@ -285,7 +285,8 @@ void PartMeasurer::Impl::recheck_early(std::size_t i) {
     for (const auto& name : missing) {
         if (!frames.contains(name)) continue;
         if (sees(frames, name) || sees(frames_all, name)) memos[i] = {};  // new plane faces
-        if (measured[i]->wall_faces_used || !memos[i][0].fitted) measured[i].reset();
+        if (measured[i] && (measured[i]->wall_faces_used || !memos[i][0].fitted))
+            measured[i].reset();
     }
     std::erase_if(missing, [&](const std::string& n) { return frames.contains(n); });
 }

@@ -137,7 +137,9 @@ void degrade_measured(PartMeasurement& m, const std::string& why);
 namespace hotgauge::measure {
 
 // measure_part in stages, for a cell that wants its answer soon after the last profile: faces are
-// added as they become final, and each feature is measured as soon as every face it uses is in.
+// added as they become final, and each feature is measured as soon as every face it uses is in
+// (a forging's diameter as soon as its first face is, and again if a later face changes it:
+// docs/measurement.md "In two steps").
 // The same numbers as measure_part on the same inputs, whatever the grouping. `rec`, and the
 // scans, displacements and runs given to add_faces, must outlive the measurer.
 class PartMeasurer {
