@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -733,11 +734,41 @@ TEST(CompensatedMeasurement, LostDatagramsNeverMakeAGoodPartNok) {
 // It must give exactly what the offline tool's run() gives on the finished recording: on an
 // ideal part, whose diameters are measured before the side faces are in, and on a forged one,
 // whose corners take their draft from the side faces and are measured again once they are in.
-class PartRunSteps : public ::testing::TestWithParam<bool> {};
+class PartRunSteps : public ::testing::TestWithParam<bool> {
+  protected:
+    // The part (ideal or forged) and the offline tool's run of it, made once for both tests.
+    struct Case {
+        sim::SimResult s;
+        pipeline::PartResult whole;
+    };
+    static const Case& part(bool forged) {
+        static const std::array<Case, 2> cases = [] {
+            std::array<Case, 2> out;
+            for (const bool f : {false, true}) {
+                out[f].s = simulate(env().cell, 16, f);
+                out[f].whole = pipeline::run(out[f].s.recording, env().recipe, {});
+            }
+            return out;
+        }();
+        return cases[forged];
+    }
+    // Bit for bit, feature by feature.
+    static void expect_same(const measure::PartMeasurement& a, const measure::PartMeasurement& b,
+                            const std::string& what) {
+        ASSERT_EQ(a.features.size(), b.features.size());
+        for (std::size_t j = 0; j < b.features.size(); ++j) {
+            const auto &x = a.features[j], &y = b.features[j];
+            EXPECT_EQ(x.hot_mm, y.hot_mm) << x.name << ", " << what;
+            EXPECT_EQ(x.verdict, y.verdict) << x.name << ", " << what;
+            EXPECT_EQ(x.u_mm, y.u_mm) << x.name << ", " << what;
+            EXPECT_EQ(x.method, y.method) << x.name << ", " << what;
+            EXPECT_EQ(x.reason, y.reason) << x.name << ", " << what;
+        }
+    }
+};
 INSTANTIATE_TEST_SUITE_P(IdealAndForged, PartRunSteps, ::testing::Bool());
 TEST_P(PartRunSteps, InStepsWithAGrowingRecordIsExactlyRun) {
-    const auto s = simulate(env().cell, 16, GetParam());
-    const auto whole = pipeline::run(s.recording, env().recipe, {});
+    const auto& [s, whole] = part(GetParam());
     ASSERT_TRUE(whole.match && whole.match->found);
     core::Recording growing = s.recording;  // as the daemon has it at the last profile
     core::FaceScan& last = growing.faces.back();
@@ -754,15 +785,7 @@ TEST_P(PartRunSteps, InStepsWithAGrowingRecordIsExactlyRun) {
     const auto steps = run.finish();
     ASSERT_TRUE(steps.match && steps.match->found);
     EXPECT_TRUE(steps.match->T_world_part.isApprox(whole.match->T_world_part, 0.0));
-    ASSERT_EQ(steps.measurement.features.size(), whole.measurement.features.size());
-    for (std::size_t j = 0; j < whole.measurement.features.size(); ++j) {
-        const auto &a = steps.measurement.features[j], &b = whole.measurement.features[j];
-        EXPECT_EQ(a.hot_mm, b.hot_mm) << a.name;  // bit for bit
-        EXPECT_EQ(a.verdict, b.verdict) << a.name;
-        EXPECT_EQ(a.u_mm, b.u_mm) << a.name;
-        EXPECT_EQ(a.method, b.method) << a.name;
-        EXPECT_EQ(a.reason, b.reason) << a.name;
-    }
+    expect_same(steps.measurement, whole.measurement, "in steps");
     EXPECT_EQ(steps.warnings, whole.warnings);
     // The forged part's corners did look to the side faces (else the test proves nothing).
     const auto& fs = whole.measurement.features;
@@ -775,8 +798,7 @@ TEST_P(PartRunSteps, InStepsWithAGrowingRecordIsExactlyRun) {
 // measured once its first face is in, then again when its side faces come, one by one or both at
 // once.
 TEST_P(PartRunSteps, AnyGroupingOfTheFacesIsMeasurePart) {
-    const auto s = simulate(env().cell, 16, GetParam());
-    const auto whole = pipeline::run(s.recording, env().recipe, {});
+    const auto& [s, whole] = part(GetParam());
     ASSERT_TRUE(whole.match && whole.match->found);
     const Eigen::Isometry3d& T = whole.match->T_world_part;
     const auto& u = whole.displacement_mm;
@@ -790,14 +812,7 @@ TEST_P(PartRunSteps, AnyGroupingOfTheFacesIsMeasurePart) {
             m.add_faces(first, end, u, {});
             first = end;
         }
-        const auto steps = m.finish();
-        ASSERT_EQ(steps.features.size(), all.features.size());
-        for (std::size_t j = 0; j < all.features.size(); ++j) {
-            const auto &a = steps.features[j], &b = all.features[j];
-            EXPECT_EQ(a.hot_mm, b.hot_mm) << a.name << " after " << ends.size() << " groups";
-            EXPECT_EQ(a.u_mm, b.u_mm) << a.name;
-            EXPECT_EQ(a.method, b.method) << a.name;
-        }
+        expect_same(m.finish(), all, std::to_string(ends.size()) + " groups");
     }
 }
 

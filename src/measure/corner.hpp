@@ -115,10 +115,11 @@ struct CornerMemo {
     CornerFit fit;          // the free fit, the corner when its wall was seen
     CornerPrior prior;
     // The wall out of the plane's faces' view: the corner refitted from `start` (the last free
-    // fit) with a held draft, in the window (s_in, s_beyond, depth; step: a short step's depth).
+    // fit, no far corner) with a held draft, in the last pass's window (s_in inside the circle,
+    // depth down the wall; step: a short step's depth).
     bool wall_unseen = false;
     CornerModel start;
-    double s_in = 0, s_beyond = 0, depth = 0, step = 0;
+    double s_in = 0, depth = 0, step = 0;
 };
 
 // Diameter `f` at its theoretical sharp corner when its edge is filleted or its wall seen: the

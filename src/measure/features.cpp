@@ -278,13 +278,12 @@ struct PartMeasurer::Impl {
 void PartMeasurer::Impl::recheck_early(std::size_t i) {
     const FeatureSpec& f = ctx.recipe.features[i];
     auto& missing = early_without[i];
-    const auto sees = [&](const auto& map, const std::string& name) {
-        auto it = map.find(name);
-        return it != map.end() && detail::sees_edge_plane(ctx, f, it->second);
-    };
     for (const auto& name : missing) {
-        if (!frames.contains(name)) continue;
-        if (sees(frames, name) || sees(frames_all, name)) memos[i] = {};  // new plane faces
+        auto it = frames.find(name);
+        if (it == frames.end()) continue;
+        // A face that sees the edge's plane (by its view alone, so with or without its untrusted
+        // profiles) changes the corner's own fit.
+        if (detail::sees_edge_plane(ctx, f, it->second)) memos[i] = {};
         if (measured[i] && (measured[i]->wall_faces_used || !memos[i][0].fitted))
             measured[i].reset();
     }

@@ -203,8 +203,7 @@ CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
     if (!d && step > 0.0) {
         // The far fillet and 1.5 mm of the far level in the window; again with 4 mm, for how
         // much the result leans on the model's shape. One gathering, the first a part of it.
-        const double s_far =
-            memo.s_beyond + prior.t_max * step + (m.rho2 > 0.0 ? m.rho2 : prior.rho_max);
+        const double s_far = prior.t_max * step + prior.rho_max;
         const auto wide =
             corner_points(frames, ep, side, m.centre, m.radius, memo.s_in, s_far + 4.0, step + 0.5);
         std::vector<CornerPoint> near;
@@ -219,9 +218,8 @@ CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
                 far.u_model = std::abs(f.m.radius - far.m.radius);
                 // The same samples with the orthogonal distance: how much the steep fillets'
                 // weighting moves the corner, which two fillets far apart amplify.
-                std::vector<CornerPoint> ortho_pts = near;
-                for (auto& p : ortho_pts) p.ray.setZero();
-                const CornerFit o = fit_corner(ortho_pts, side, far.m, prior, false);
+                for (auto& p : near) p.ray.setZero();
+                const CornerFit o = fit_corner(near, side, far.m, prior, false);
                 far.u_estimator = std::abs(o.m.radius - far.m.radius);
                 return far;
             }
@@ -229,7 +227,7 @@ CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
         prior.depth = 0.0;
     }
     const auto pts = corner_points(frames, ep, side, m.centre, m.radius, memo.s_in,
-                                   memo.s_beyond + 0.5 + prior.t_max * depth, depth);
+                                   0.5 + prior.t_max * depth, depth);
     prior.fix_draft = true;
     if (d) {
         prior.t_known = d->t;
@@ -257,9 +255,9 @@ CornerMemo plane_faces_corner(const Context& ctx, const core::FeatureSpec& f,
     std::vector<CornerPoint> pts;
     for (int pass = 0; pass < 2; ++pass) {
         out.s_in = pass == 0 ? prior.rho_max + 1.0 + slack : m.rho + 1.5;
-        out.s_beyond = pass == 0 ? slack : 0.0;
+        const double s_beyond = pass == 0 ? slack : 0.0;
         pts = corner_points(frames, ep, side, m.centre, m.radius, out.s_in,
-                            out.s_beyond + 0.5 + prior.t_max * out.depth, out.depth);
+                            s_beyond + 0.5 + prior.t_max * out.depth, out.depth);
         // Nothing beyond the plane (a sharp edge over a wall no sensor of the plane sees: every
         // edge of an ideal part): the edge brackets, without a profile fit that would say so.
         out.brackets = pass == 0 && std::count_if(pts.begin(), pts.end(), [](const CornerPoint& p) {
