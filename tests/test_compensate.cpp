@@ -889,3 +889,75 @@ TEST(CompensateBadInput, AMasterMeasuredDegradedIsInconclusive) {
     EXPECT_FALSE(failed->passed);
     EXPECT_FALSE(failed->inconclusive);
 }
+
+namespace {
+
+// White noise of one-sided density `density_ug` µg/√Hz at `fs`, gravity and press modes on top.
+std::vector<double> noisy_accel(double density_ug, double fs, std::size_t n, std::uint64_t seed,
+                                bool modes) {
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> normal(0.0, 1.0);
+    const double sigma = density_ug * 1e-6 * 9.80665 * std::sqrt(fs / 2.0);
+    std::vector<double> a(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        const double t = static_cast<double>(i) / fs;
+        a[i] = 9.80665 + sigma * normal(rng);
+        if (modes)  // the default cell's modes at 0.6, 0.25 and 0.08 mm: 1.5-7 m/s²
+            a[i] += 1.5 * std::sin(kTwoPi * 8 * t) + 5.2 * std::sin(kTwoPi * 23 * t + 1.0) +
+                    7.0 * std::sin(kTwoPi * 47 * t + 2.0);
+    }
+    return a;
+}
+
+}  // namespace
+
+// The accelerometer's noise is read off the record's top band, under press modes 300 times
+// stronger than the noise.
+TEST(CompensationNoise, DensityReadOffTheTopBandUnderPressModes) {
+    const double fs = 2000.0;
+    std::array<std::vector<double>, 3> a;
+    const double truth_ug[3] = {25.0, 10.0, 60.0};
+    for (int k = 0; k < 3; ++k) a[k] = noisy_accel(truth_ug[k], fs, 6400, 11 + k, true);
+    const auto d = compensate::accel_noise_density(a, fs);
+    for (int k = 0; k < 3; ++k) {
+        const double ug = std::sqrt(d[k]) / 9.80665 * 1e6;
+        EXPECT_NEAR(ug, truth_ug[k], 0.08 * truth_ug[k]) << "axis " << k;
+    }
+    // Too short a record to tell: nothing, not a guess.
+    std::array<std::vector<double>, 3> short_record{std::vector<double>(500, 9.8),
+                                                    std::vector<double>(500, 0.0),
+                                                    std::vector<double>(500, 0.0)};
+    EXPECT_EQ(compensate::accel_noise_density(short_record, fs)[0], 0.0);
+}
+
+// The predicted error against the integrator itself: 300 records of white noise through
+// integrate_twice, the displacement's variance and its covariance 0.1 and 0.3 s apart in the middle
+// of the record, where the profiles are (the tapers and margins keep them off the ends).
+TEST(CompensationNoise, PredictsWhatTheIntegratorMakesOfWhiteNoise) {
+    const double fs = 2000.0, density_ug = 25.0;
+    const std::size_t n = 6400;  // a 1.2 s scan with 1 s margins
+    const CompensationConfig c;
+    const double s_a = std::pow(density_ug * 1e-6 * 9.80665, 2);
+    const core::DisplacementNoise model = compensate::displacement_noise({s_a, s_a, s_a}, c);
+    ASSERT_TRUE(model.known());
+    double var = 0, cov1 = 0, cov3 = 0;
+    std::size_t m = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+        const auto u =
+            compensate::integrate_twice(noisy_accel(density_ug, fs, n, 100 + trial, false), fs, c);
+        for (std::size_t i = 2000; i < 4400; i += 50, ++m) {
+            var += u[i] * u[i] * 1e6;  // m² → mm²
+            cov1 += u[i] * u[i + 200] * 1e6;
+            cov3 += u[i] * u[i - 600] * 1e6;
+        }
+    }
+    var /= static_cast<double>(m), cov1 /= static_cast<double>(m), cov3 /= static_cast<double>(m);
+    std::printf(
+        "displacement error: σ %.2f µm (model %.2f), cov at 0.1 s %.3f (model %.3f), at "
+        "0.3 s %.3f (model %.3f) µm²\n",
+        1e3 * std::sqrt(var), 1e3 * std::sqrt(model.cov(2, 0.0)), 1e6 * cov1,
+        1e6 * model.cov(2, 0.1), 1e6 * cov3, 1e6 * model.cov(2, 0.3));
+    EXPECT_NEAR(std::sqrt(var), std::sqrt(model.cov(2, 0.0)), 0.08 * std::sqrt(var));
+    EXPECT_NEAR(cov1, model.cov(2, 0.1), 0.1 * var);
+    EXPECT_NEAR(cov3, model.cov(2, 0.3), 0.1 * var);
+}

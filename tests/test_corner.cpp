@@ -8,6 +8,7 @@
 #include <random>
 
 #include "../src/measure/corner.hpp"
+#include "../src/measure/drift.hpp"
 
 namespace hotgauge::measure::detail {
 namespace {
@@ -203,3 +204,54 @@ TEST(CornerProfile, AStepsTwoFilletsFixTheDraftOfAWallNotSeen) {
 
 }  // namespace
 }  // namespace hotgauge::measure::detail
+
+// The compensation's own error in a weighted sum of samples (drift.hpp): one face's error e(t)
+// with σ 2 µm along world z, correlated 0.5 at 10 ms and not at all at 20 ms.
+TEST(CompensationDrift, SumsOverProfilesWithTheErrorsCovariance) {
+    using namespace hotgauge;
+    core::FaceScan scan;
+    for (int k = 0; k < 5; ++k) scan.profile_times_ns.push_back(1'000'000'000 + k * 10'000'000);
+    core::DisplacementNoise noise;
+    noise.lag_s = 0.01;
+    noise.acov_mm2 = {std::vector<double>{0, 0, 0}, std::vector<double>{0, 0, 0},
+                      std::vector<double>{4e-6, 2e-6, 0.0}};
+    measure::detail::FaceFrame fr;
+    fr.scan = &scan;
+    fr.n = 5;
+    fr.M = Eigen::Matrix3d::Identity();
+    fr.noise = &noise;
+    const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
+    {
+        measure::detail::DriftSum d;  // one profile: σ
+        d.add(fr, 2, z);
+        EXPECT_NEAR(d.u(), 2e-3, 1e-12);
+    }
+    {
+        measure::detail::DriftSum d;  // a difference 10 ms apart: √(4 + 4 − 2·2) µm
+        d.add(fr, 1, z);
+        d.add(fr, 2, -z);
+        EXPECT_NEAR(d.u(), 2e-3, 1e-12);
+    }
+    {
+        measure::detail::DriftSum d;  // 20 ms apart: independent, √8 µm; along x: nothing
+        d.add(fr, 0, z);
+        d.add(fr, 2, -z);
+        d.add(fr, 3, Eigen::Vector3d::UnitX());
+        EXPECT_NEAR(d.u(), std::sqrt(8.0) * 1e-3, 1e-12);
+    }
+    {
+        // The part turned upside down in the world (M = R_part_world · R_world_camera): a
+        // part-frame z weight is world −z, the same σ; a part-frame x weight stays off z.
+        fr.M = Eigen::AngleAxisd(std::numbers::pi, Eigen::Vector3d::UnitX()).toRotationMatrix();
+        measure::detail::DriftSum d;
+        d.add(fr, 2, 0.5 * z);
+        d.add(fr, 3, Eigen::Vector3d::UnitX());
+        EXPECT_NEAR(d.u(), 1e-3, 1e-12);
+    }
+    {
+        measure::detail::DriftSum d;  // a face without a noise model adds nothing
+        fr.noise = nullptr;
+        d.add(fr, 2, z);
+        EXPECT_EQ(d.u(), 0.0);
+    }
+}

@@ -9,7 +9,7 @@ namespace hotgauge::core {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
-constexpr double kMaxSag = 0.004;    // mm: largest sag of a fillet chord (cold)
+constexpr double kMaxSag = 0.0005;   // mm: largest sag of a fillet chord (cold)
 constexpr int kMinChords = 16;       // per fillet arc
 constexpr double kNarrowFace = 0.4;  // a fillet's tangent length <= this × each of its faces
 

@@ -1,5 +1,6 @@
 #include "hotgauge/core/recording.hpp"
 
+#include <cmath>
 #include <cstdio>
 
 namespace hotgauge::core {
@@ -9,6 +10,16 @@ std::string describe(const std::string& face, const UntrustedProfiles& u) {
     std::snprintf(b, sizeof b, "%s profiles %lld–%lld (%.3f–%.3f s): ", face.c_str(),
                   static_cast<long long>(u.first), static_cast<long long>(u.last), u.t0_s, u.t1_s);
     return b + u.cause;
+}
+
+double DisplacementNoise::cov(int axis, double tau_s) const {
+    const std::vector<double>& c = acov_mm2[static_cast<std::size_t>(axis)];
+    if (!known()) return 0.0;
+    const double x = std::abs(tau_s) / lag_s;
+    const auto i = static_cast<std::size_t>(x);
+    if (i + 1 >= c.size()) return 0.0;
+    const double f = x - static_cast<double>(i);
+    return c[i] + f * (c[i + 1] - c[i]);
 }
 
 }  // namespace hotgauge::core

@@ -319,11 +319,26 @@ CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const Cor
         (part == 0 ? out.n_plane : part == 1 ? out.n_arc : part == 2 ? out.n_wall : out.n_far)++;
         if (part == 0 || part >= 3) continue;  // the corner's circle: its fillet and wall
         const Eigen::Vector2d d = pts[q].q - out.m.centre;
+        if (jackknife) {  // a fit whose u is reported
+            if (out.radial.empty() || out.radial.back().first != pts[q].profile)
+                out.radial.emplace_back(pts[q].profile, Eigen::Vector2d::Zero());
+            out.radial.back().second += d.normalized();
+        }
         const double turn = (std::atan2(d.y(), d.x()) + std::numbers::pi) / (2 * std::numbers::pi);
         const int sec = std::min(7, static_cast<int>(turn * 8));
         sum[sec] += side * e;  // samples beyond the profile: a larger circle (outer edge)
         cnt[sec]++;
     }
+    std::sort(out.radial.begin(), out.radial.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+    std::size_t kept = 0;
+    for (std::size_t q = 0; q < out.radial.size(); ++q) {
+        if (kept > 0 && out.radial[kept - 1].first == out.radial[q].first)
+            out.radial[kept - 1].second += out.radial[q].second;
+        else
+            out.radial[kept++] = out.radial[q];
+    }
+    out.radial.resize(kept);
     const std::int64_t n_profile = out.n_arc + out.n_wall;
     for (int sec = 0; sec < 8; ++sec)
         if (cnt[sec] >= std::max<std::int64_t>(10, n_profile / 32))

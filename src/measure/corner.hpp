@@ -91,6 +91,10 @@ struct CornerFit {
     std::int64_t n_wall = 0, n_arc = 0, n_plane = 0;  // inliers by the part of the profile
     std::int64_t n_far = 0;                           // on the far fillet and the far level
     std::vector<double> sector_radius;                // the radius from each sector's points
+    // Per profile (CornerPoint::profile), the sum of the unit vectors away from the centre of
+    // its fillet and wall inliers: how a shift of that profile moves the radius (drift.hpp).
+    // Only on a fit with the jackknife (one whose u is reported).
+    std::vector<std::pair<std::int64_t, Eigen::Vector2d>> radial;
 };
 
 // Least squares (Levenberg–Marquardt, 3σ rejection) of the corner profile to the samples. The

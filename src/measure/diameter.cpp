@@ -6,6 +6,7 @@
 #include <numbers>
 
 #include "corner.hpp"
+#include "drift.hpp"
 #include "edges.hpp"
 #include "feature_kinds.hpp"
 
@@ -66,13 +67,18 @@ std::string profile_span(const std::vector<const FaceFrame*>& frames,
     return out;
 }
 
-// Brackets across the edge within `window` of the circle (cc, rc), as 2D pairs (A, B).
+// A sample's face (index in the frames) and profile.
+using SampleAt = std::pair<std::size_t, std::int64_t>;
+
+// Brackets across the edge within `window` of the circle (cc, rc), as 2D pairs (A, B), and
+// where each was seen.
 std::vector<Pair2d> edge_brackets(const Context& ctx, const std::vector<const FaceFrame*>& frames,
                                   const EdgePlane& ep,
                                   const std::vector<std::vector<std::int64_t>>& seeds,
                                   bool plane_inside, const Eigen::Vector2d& cc, double rc,
-                                  double window) {
+                                  double window, std::vector<SampleAt>& at) {
     std::vector<Pair2d> out;
+    at.clear();
     for (std::size_t fi = 0; fi < frames.size(); ++fi) {
         const FaceFrame& fr = *frames[fi];
         auto on = [&](std::int64_t k, std::int64_t i) {
@@ -87,8 +93,10 @@ std::vector<Pair2d> edge_brackets(const Context& ctx, const std::vector<const Fa
             return (plane_inside ? ra < rb : ra > rb) && std::abs(rm - rc) <= window;
         };
         for (const auto& b :
-             bracket_edges(fr, seeds[fi], ep.thr, ctx.c.max_pair_gap_mm, on, cross, keep))
+             bracket_edges(fr, seeds[fi], ep.thr, ctx.c.max_pair_gap_mm, on, cross, keep)) {
             out.emplace_back(ep.to2d(b.A), ep.to2d(b.B));
+            at.emplace_back(fi, b.k);
+        }
     }
     return out;
 }
@@ -97,6 +105,7 @@ std::vector<Pair2d> edge_brackets(const Context& ctx, const std::vector<const Fa
 // around the first fine circle. Returns the inlier brackets and the last midpoint fit.
 struct FineEdge {
     std::vector<Pair2d> brackets;  // inliers of the midpoint fit
+    std::vector<SampleAt> at;      // ... where each was seen
     std::vector<Eigen::Vector2d> midpoints;
     CircleFit fit;
 };
@@ -108,7 +117,8 @@ std::optional<FineEdge> fine_edge(const Context& ctx, const core::FeatureSpec& f
     double rc = coarse.radius, window = ctx.c.fine_window_mm;
     FineEdge out;
     for (int pass = 0; pass < 2; ++pass) {
-        const auto br = edge_brackets(ctx, frames, ep, seeds, plane_inside, cc, rc, window);
+        std::vector<SampleAt> at;
+        const auto br = edge_brackets(ctx, frames, ep, seeds, plane_inside, cc, rc, window, at);
         std::vector<Eigen::Vector2d> mids;
         for (const auto& [A, B] : br) mids.push_back(0.5 * (A + B));
         if (static_cast<int>(mids.size()) < ctx.c.min_edge_points) {
@@ -126,6 +136,7 @@ std::optional<FineEdge> fine_edge(const Context& ctx, const core::FeatureSpec& f
         for (std::size_t q = 0; q < br.size(); ++q)
             if (fit->inlier[q]) {
                 out.brackets.push_back(br[q]);
+                out.at.push_back(at[q]);
                 out.midpoints.push_back(mids[q]);
             }
         out.fit = fit->fit;
@@ -134,6 +145,20 @@ std::optional<FineEdge> fine_edge(const Context& ctx, const core::FeatureSpec& f
         window = ctx.c.refine_window_mm;
     }
     return out;
+}
+
+// The compensation's own error in the diameter (drift.hpp): twice the mean of the brackets'
+// displacement error away from the centre.
+double edge_drift_u(const std::vector<const FaceFrame*>& frames, const EdgePlane& ep,
+                    const FineEdge& fe, const Eigen::Vector2d& centre) {
+    if (fe.brackets.empty()) return 0.0;
+    DriftSum d;
+    const double w = 2.0 / static_cast<double>(fe.brackets.size());
+    for (std::size_t q = 0; q < fe.brackets.size(); ++q) {
+        const Eigen::Vector2d out = (fe.midpoints[q] - centre).normalized();
+        d.add(*frames[fe.at[q].first], fe.at[q].second, w * (out.x() * ep.e1 + out.y() * ep.e2));
+    }
+    return d.u();
 }
 
 // Arc coverage in 10° bins and the sector diameters (multiple sampling, paper §4.3).
@@ -288,7 +313,8 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
     r.hot_mm = 2.0 * radius;
     r.u_budget = {{"fit", 2.0 * fe->fit.u_radius_mm},
                   {"sampling", 2.0 * agreed.u},
-                  {"compensation", ep->profile_scatter}};
+                  {"compensation",
+                   std::hypot(ep->profile_scatter, edge_drift_u(frames, *ep, *fe, bc.center))}};
     if (u_arc > 0) r.u_budget.push_back({"partial arc", 2.0 * u_arc});
     r.fit_rms_mm = fe->fit.rms_mm;
     r.n_points = fe->fit.n_points;

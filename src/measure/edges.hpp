@@ -39,6 +39,7 @@ constexpr std::int64_t kNeighbours[4][2] = {{0, 1}, {0, -1}, {1, 0}, {-1, 0}};
 // between the two rays' crossings A (last sample on the surface) and B (first one beyond).
 struct Bracket {
     Eigen::Vector3d A, B;
+    std::int64_t k = 0;  // A's profile
 };
 template <class On, class Cross, class Keep>
 std::vector<Bracket> bracket_edges(const FaceFrame& fr, const std::vector<std::int64_t>& seeds,
@@ -72,7 +73,7 @@ std::vector<Bracket> bracket_edges(const FaceFrame& fr, const std::vector<std::i
             const Eigen::Vector3d A = fr.ray_origin(k, i) + sa * fr.ray_dir(i);
             const Eigen::Vector3d B = fr.ray_origin(kb, ib) + sb * fr.ray_dir(ib);
             if ((A - B).norm() > max_gap || !keep(A, B)) continue;
-            out.push_back({A, B});
+            out.push_back({A, B, k});
         }
     }
     return out;

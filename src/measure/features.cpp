@@ -329,7 +329,8 @@ PartMeasurer::PartMeasurer(const core::Recipe& recipe, const core::Recording& re
 PartMeasurer::~PartMeasurer() = default;
 
 void PartMeasurer::add_faces(std::size_t first, std::size_t end, const core::FaceDisplacements& u,
-                             const FaceUntrusted& untrusted) {
+                             const FaceUntrusted& untrusted,
+                             const core::FaceDisplacementNoise& noise) {
     Impl& m = *impl_;
     const auto find = [](const auto& map, const std::string& name) {
         auto it = map.find(name);
@@ -347,6 +348,7 @@ void PartMeasurer::add_faces(std::size_t first, std::size_t end, const core::Fac
         prepared[j] = detail::make_frame(f, m.T_part_world, find(u, f.name),
                                          jobs[j].second ? nullptr : find(untrusted, f.name),
                                          m.bounds.r_max, m.bounds.z_lo, m.bounds.z_hi);
+        prepared[j].noise = find(noise, f.name);
     });
     for (std::size_t j = 0; j < jobs.size(); ++j) {
         const std::string& name = m.rec.faces[jobs[j].first].name;
@@ -388,9 +390,10 @@ PartMeasurement PartMeasurer::finish() {
 PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& rec,
                              const Eigen::Isometry3d& T_world_part,
                              const core::FaceDisplacements& u, const MeasureConfig& config,
-                             const FaceUntrusted& untrusted) {
+                             const FaceUntrusted& untrusted,
+                             const core::FaceDisplacementNoise& noise) {
     PartMeasurer m(recipe, rec, T_world_part, config);
-    m.add_faces(0, rec.faces.size(), u, untrusted);
+    m.add_faces(0, rec.faces.size(), u, untrusted, noise);
     return m.finish();
 }
 

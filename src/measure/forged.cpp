@@ -6,6 +6,7 @@
 #include <iterator>
 
 #include "corner.hpp"
+#include "drift.hpp"
 #include "edges.hpp"
 #include "feature_kinds.hpp"
 #include "frame.hpp"
@@ -38,6 +39,8 @@ constexpr double kBeyondPlaneMm = 0.15;
 // fillet cannot be told from the noise below a sharp edge's plane (an ideal part at σ 0.1 mm:
 // a "fillet" of 0.3-0.4 mm fitted to it put the corner 0.13 mm out).
 constexpr double kSharpRhoMm = 0.1, kSharpRhoNoise = 5.0;
+// CornerPoint::profile: face index × this + profile.
+constexpr std::int64_t kProfileKeyFace = 1'000'000;
 // Fewer wall samples than this do not fix the wall's draft.
 constexpr std::int64_t kMinWallSamples = 150;
 // The profile's samples scatter by the range noise (0.05 mm); far more is not this corner.
@@ -108,7 +111,7 @@ std::vector<CornerPoint> corner_points(const std::vector<const FaceFrame*>& fram
                                                ? Eigen::Vector2d((q - c).normalized())
                                                : Eigen::Vector2d::UnitX();
             const Eigen::Vector2d in_plane(ray.dot(ep.e1), ray.dot(ep.e2));
-            const auto profile = static_cast<std::int64_t>(n.q / fr->w + face * 1'000'000);
+            const auto profile = static_cast<std::int64_t>(n.q / fr->w + face * kProfileKeyFace);
             out.push_back({q, h, {in_plane.dot(radial), ray.dot(ep.plane.normal)}, profile});
         });
     }
@@ -185,6 +188,21 @@ std::optional<Draft> wall_draft(const std::vector<const FaceFrame*>& wall_frames
         });
     }
     return std::nullopt;
+}
+
+// The compensation's own error in the diameter: twice the mean, over the fillet's and the wall's
+// inliers, of their displacement error away from the centre (CornerFit::radial).
+double drift_u(const std::vector<const FaceFrame*>& frames, const EdgePlane& ep,
+               const CornerFit& fit) {
+    const auto n = static_cast<double>(fit.n_arc + fit.n_wall);
+    if (n <= 0.0) return 0.0;
+    DriftSum d;
+    for (const auto& [key, sum] : fit.radial) {
+        const auto face = static_cast<std::size_t>(key / kProfileKeyFace);
+        if (key < 0 || face >= frames.size()) continue;
+        d.add(*frames[face], key % kProfileKeyFace, 2.0 / n * (sum.x() * ep.e1 + sum.y() * ep.e2));
+    }
+    return d.u();
 }
 
 }  // namespace
@@ -298,7 +316,8 @@ bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
         return true;
     }
     r.hot_mm = 2.0 * m.radius;
-    r.u_budget = {{"fit", 2.0 * fit.u_radius}, {"compensation", ep.profile_scatter}};
+    r.u_budget = {{"fit", 2.0 * fit.u_radius},
+                  {"compensation", std::hypot(ep.profile_scatter, drift_u(frames, ep, fit))}};
     if (fit.u_model > 0.0) r.u_budget.emplace_back("model", 2.0 * fit.u_model);
     if (fit.u_estimator > 0.0) r.u_budget.emplace_back("estimator", 2.0 * fit.u_estimator);
 

@@ -27,6 +27,8 @@ struct FaceFrame {
     std::vector<Eigen::Vector3d> origin;  // per profile: camera origin in the part frame
     std::vector<double> col_a, col_b;
     Eigen::Vector3d view;  // camera +z (away from the sensor), part frame
+    // The compensation's own error on this face (drift.hpp), or null: not known.
+    const core::DisplacementNoise* noise = nullptr;
 
     struct Near {
         std::int64_t q;     // k·w + i

@@ -8,6 +8,7 @@
 #include <limits>
 #include <numbers>
 
+#include "drift.hpp"
 #include "edges.hpp"
 #include "feature_kinds.hpp"
 
@@ -24,6 +25,8 @@ struct LevelEnd {
     EdgeEstimate est;
     std::optional<PlaneFit> plane;                  // plane-derived ends
     std::vector<Eigen::Vector3d> plane_points;      // ... a convex corner's: the plane's inliers
+    std::vector<std::int64_t> plane_keys;           // ... their profiles (PlaneResult)
+    std::vector<const FaceFrame*> plane_frames;     // ... the faces the keys count in
     Eigen::Vector3d ref = Eigen::Vector3d::Zero();  // the end's point (on the plane at the wall)
     std::vector<double> angles;                     // silhouette: azimuth of each bracket
     std::vector<Interval> intervals;                // silhouette: each bracket's z interval
@@ -133,6 +136,8 @@ std::optional<LevelEnd> corner_end(const Context& ctx, const std::string& level,
     e.ref = on_plane_at(pl.fit, w.radius.mean, w.phi);
     e.u_fit = plane_u_at(pl, e.ref);
     e.plane_points = std::move(pl.points);
+    e.plane_keys = std::move(pl.profile_keys);
+    e.plane_frames = frames;
     e.est = {level, "convex corner", {}, e.ref.z(), e.u_fit, pl.fit.n_points};
     return e;
 }
@@ -368,6 +373,12 @@ void height_edges(const Context& ctx, const core::FeatureSpec& f,
     r.n_points = e[0].est.n_points + e[1].est.n_points;
     r.u_budget = {{"fit", std::hypot(e[0].u_fit, e[1].u_fit)},
                   {"pose", std::hypot(e[0].u_pose, e[1].u_pose)}};
+    if (!e[0].plane_keys.empty() && !e[1].plane_keys.empty()) {
+        DriftSum d;
+        add_plane(d, e[0].plane_frames, e[0].plane_keys, -Eigen::Vector3d::UnitZ());
+        add_plane(d, e[1].plane_frames, e[1].plane_keys, Eigen::Vector3d::UnitZ());
+        if (const double u = d.u(); u > 0.0) r.u_budget.emplace_back("compensation", u);
+    }
     const int planes = (e[0].plane ? 1 : 0) + (e[1].plane ? 1 : 0);
     r.method = planes == 2 ? "planes" : planes == 1 ? "plane and edge" : "edges";
     for (const auto& end : e) {
@@ -444,6 +455,10 @@ void height_planes(const Context& ctx, const core::FeatureSpec& f,
     r.n_points = A.n_points + B.n_points;
     r.u_budget = {{"fit", std::sqrt(A.rms_mm * A.rms_mm / static_cast<double>(A.n_points) +
                                     B.rms_mm * B.rms_mm / static_cast<double>(B.n_points))}};
+    DriftSum d;
+    add_plane(d, frames, pl[0].profile_keys, -Eigen::Vector3d::UnitZ());
+    add_plane(d, frames, pl[1].profile_keys, Eigen::Vector3d::UnitZ());
+    if (const double u = d.u(); u > 0.0) r.u_budget.emplace_back("compensation", u);
     r.method = "planes";
     std::vector<std::string> faces;
     for (const auto* fr : frames) faces.push_back(fr->scan->name);

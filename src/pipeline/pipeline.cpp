@@ -122,6 +122,7 @@ struct PartRun::Impl {
     PipelineOptions o;
     PartResult r;
     core::FaceDisplacements u;
+    core::FaceDisplacementNoise noise;
     measure::FaceUntrusted untrusted;
     std::optional<measure::PartMeasurer> measurer;  // none: nothing to measure (r says why)
     std::size_t faces_added = 0;
@@ -141,6 +142,12 @@ void PartRun::Impl::compensate(const core::FaceScan& face) {
     auto fc = compensate::compensate_face(face, o.compensation);
     r.compensation.push_back({fc.face, fc.applied, fc.degraded, fc.reasons, fc.n_degraded,
                               fc.peak_mm, fc.rms_mm, fc.rate_hz, fc.untrusted});
+    if (fc.applied && fc.noise.known()) {
+        auto& c = r.compensation.back();
+        c.accel_noise_ug = fc.accel_noise_ug;
+        for (int a = 0; a < 3; ++a) c.drift_sigma_mm[a] = std::sqrt(fc.noise.cov(a, 0.0));
+        noise.insert_or_assign(face.name, std::move(fc.noise));
+    }
     for (const auto& why : fc.reasons) r.warnings.push_back(face.name + ": compensation: " + why);
     if (fc.applied) u.insert_or_assign(face.name, std::move(fc.displacement_mm));
     if (!fc.untrusted.empty()) untrusted.insert_or_assign(face.name, std::move(fc.untrusted));
@@ -195,7 +202,7 @@ std::optional<Eigen::Isometry3d> PartRun::Impl::find_pose() {
 
 void PartRun::Impl::add_faces(std::size_t first, std::size_t end) {
     const auto t0 = Clock::now();
-    measurer->add_faces(first, end, u, untrusted);
+    measurer->add_faces(first, end, u, untrusted, noise);
     faces_added = end;
     measure_ms += ms_since(t0);
 }
@@ -333,7 +340,9 @@ std::string to_json(const PartResult& r) {
                                  {"untrusted", untrusted_json(c.untrusted)},
                                  {"peak_displacement_mm", c.peak_mm},
                                  {"rms_displacement_mm", c.rms_mm},
-                                 {"accel_rate_hz", c.rate_hz}});
+                                 {"accel_rate_hz", c.rate_hz},
+                                 {"accel_noise_ug_per_rthz", c.accel_noise_ug},
+                                 {"drift_sigma_mm", c.drift_sigma_mm}});
     j["compensation"] = comp;
     j["faces"] = json::array();
     for (const auto& f : r.faces)

@@ -20,6 +20,7 @@ import json
 import math
 import os
 import random
+import shlex
 import shutil
 import subprocess
 import sys
@@ -45,7 +46,7 @@ def bad_for(seed, recipe, every):
     return f["name"], (hi + beyond) if side > 0 else (lo - beyond)
 
 
-def one_part(bin_dir, seed, bad):
+def one_part(bin_dir, seed, bad, extra=()):
     hotgauge = os.path.join(bin_dir, "src", "app", "hotgauge")
     tmp = tempfile.mkdtemp(prefix=f"forged_{seed}_")
     try:
@@ -56,6 +57,7 @@ def one_part(bin_dir, seed, bad):
                "--t0-ns", str(1_790_000_000_000_000_000 + seed * 10**11)]
         if bad:
             cmd += ["--bad", f"{bad[0]}={bad[1]:+.4f}"]
+        cmd += list(extra)
         subprocess.run(cmd, check=True, capture_output=True, text=True)
         truth = yaml.safe_load(open(f"{tmp}/part.truth/truth.yaml"))
         out = subprocess.run([hotgauge, "measure", f"{tmp}/part", "--json", "--threads", "1"],
@@ -113,13 +115,29 @@ def main():
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--check", action="store_true")
     ap.add_argument("--check-sorting", action="store_true")
+    ap.add_argument("--simulate-args", default="",
+                    help="more `hotgauge simulate` options, e.g. \"--noise 0 --no-vibration\"")
+    ap.add_argument("--dump", help="write every measured feature (seed, error, u, method, u "
+                    "budget) to this JSON-lines file")
     a = ap.parse_args()
     recipe = yaml.safe_load(open(RECIPE))
     seeds = range(a.first_seed, a.first_seed + a.parts)
     with cf.ThreadPoolExecutor(a.jobs) as ex:
-        parts = list(ex.map(lambda s: one_part(a.build_dir, s, bad_for(s, recipe, a.bad_every)),
+        parts = list(ex.map(lambda s: one_part(a.build_dir, s, bad_for(s, recipe, a.bad_every),
+                                             shlex.split(a.simulate_args)),
                             seeds))
     rows, problems = judge(recipe, parts)
+    if a.dump:
+        with open(a.dump, "w") as out:
+            for seed, bad, truth, res in parts:
+                t = {f["name"]: f for f in truth["features"]}
+                for f in res["features"]:
+                    out.write(json.dumps({
+                        "seed": seed, "bad": bad and bad[0], "name": f["name"],
+                        "err": f["hot_mm"] - t[f["name"]]["hot_mm"] if f["hot_mm"] else None,
+                        "u": f["u_mm"], "method": f.get("method"),
+                        "budget": f.get("u_budget_mm"), "n_points": f.get("n_points"),
+                        "stage_ms": res.get("stage_ms")}) + "\n")
     n_bad = sum(1 for p in parts if p[1])
     print(f"{len(parts)} as-forged parts (seeds {seeds.start}-{seeds.stop - 1}), {n_bad} with a "
           f"bad feature; errors hot, mm, against the truth at the sharp corners")

@@ -3,6 +3,7 @@
 // integrated twice in the frequency domain, gives the head's displacement u(t); every profile is
 // moved back by it (P = P_nominal + u(t_k), recording-format-v1). docs/compensation.md.
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -34,6 +35,20 @@ struct CompensationConfig {
 std::vector<double> integrate_twice(const std::vector<double>& accel, double rate_hz,
                                     const CompensationConfig& config);
 
+// The accelerometer's noise density per world axis ((m/s²)²/Hz, one-sided), read off the
+// record's top band, [0.3, 0.45] × the rate, far above any press mode: the median of a
+// Hann-windowed periodogram of 256-sample segments over that band, over ln 2 (the median of an
+// exponential variable). A press blow's broadband burst is in few segments and the median
+// passes it by; what is left of it makes the density larger, never smaller.
+std::array<double, 3> accel_noise_density(const std::array<std::vector<double>, 3>& accel_world,
+                                          double rate_hz);
+
+// The displacement error that noise of density s_a leaves after integrate_twice: autocovariance
+// ∫ s_a·hp(f)²/(2πf)⁴·cos(2πfτ) df per world axis, at lags of 10 ms up to 2.5 s, in mm². White
+// noise is assumed: a sensor's 1/f noise and bias drift below the high-pass are not in it.
+core::DisplacementNoise displacement_noise(const std::array<double, 3>& density_si,
+                                           const CompensationConfig& config);
+
 struct FaceCompensation {
     std::string face;
     bool applied = false;              // displacement_mm is valid for (most) profiles
@@ -42,9 +57,11 @@ struct FaceCompensation {
     std::vector<Eigen::Vector3d> displacement_mm;  // per profile, world frame (0 where not applied)
     std::vector<std::uint8_t> profile_degraded;    // per profile: 1 = untrusted
     std::int64_t n_degraded = 0;
-    std::vector<core::UntrustedProfiles> untrusted;  // the same as runs, with their cause
-    double peak_mm = 0.0, rms_mm = 0.0;              // of |u| over the profiles
-    double rate_hz = 0.0;                            // resampling rate used
+    std::vector<core::UntrustedProfiles> untrusted;    // the same as runs, with their cause
+    double peak_mm = 0.0, rms_mm = 0.0;                // of |u| over the profiles
+    double rate_hz = 0.0;                              // resampling rate used
+    std::array<double, 3> accel_noise_ug = {0, 0, 0};  // density per world axis, µg/√Hz
+    core::DisplacementNoise noise;                     // the displacement's own error
 };
 
 // Per-profile world displacement of one face's sensor. Never throws: bad or missing samples make

@@ -4,6 +4,7 @@
 // everything downstream reads it and never knows where it came from.
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <array>
 #include <cstdint>
 #include <map>
 #include <optional>
@@ -65,6 +66,19 @@ using FaceUntrusted = std::map<std::string, std::vector<UntrustedProfiles>>;
 // found it; the match and the measurement move the face's points back by it. A face not in it
 // is taken as it was scanned.
 using FaceDisplacements = std::map<std::string, std::vector<Eigen::Vector3d>>;
+
+// The compensation's own error: the accelerometer's noise, integrated twice through the same
+// high-pass, leaves the displacement wrong by a slowly varying e(t), stationary in the middle of
+// the record (docs/compensation.md "Its own error"). Its autocovariance per world axis at lags
+// k·lag_s, mm²; empty when unknown (no compensation, or too little record to tell).
+struct DisplacementNoise {
+    double lag_s = 0.0;
+    std::array<std::vector<double>, 3> acov_mm2;
+    bool known() const { return lag_s > 0.0 && !acov_mm2[0].empty(); }
+    // Covariance of e_axis(t) and e_axis(t + tau): linear between lags, 0 beyond the last.
+    double cov(int axis, double tau_s) const;
+};
+using FaceDisplacementNoise = std::map<std::string, DisplacementNoise>;
 
 struct Recording {
     std::string part_id;

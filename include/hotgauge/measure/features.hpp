@@ -126,7 +126,8 @@ using FaceUntrusted = core::FaceUntrusted;
 PartMeasurement measure_part(const core::Recipe& recipe, const core::Recording& rec,
                              const Eigen::Isometry3d& T_world_part,
                              const core::FaceDisplacements& displacement_mm = {},
-                             const MeasureConfig& config = {}, const FaceUntrusted& untrusted = {});
+                             const MeasureConfig& config = {}, const FaceUntrusted& untrusted = {},
+                             const core::FaceDisplacementNoise& noise = {});
 
 // Every measured feature of `m` degraded because of `why` (a face left out, so the pose was
 // found without it): values kept, none sorts the part; the part's verdict again.
@@ -150,11 +151,11 @@ class PartMeasurer {
     PartMeasurer(const PartMeasurer&) = delete;
     PartMeasurer& operator=(const PartMeasurer&) = delete;
 
-    // Prepares faces [first, end) of `rec` (over the cores) with their displacement and
-    // untrusted runs from `u` and `untrusted` (a face absent there: none), then measures the
-    // features they complete.
+    // Prepares faces [first, end) of `rec` (over the cores) with their displacement, untrusted
+    // runs and the displacement's own error from `u`, `untrusted` and `noise` (a face absent
+    // there: none), then measures the features they complete.
     void add_faces(std::size_t first, std::size_t end, const core::FaceDisplacements& u,
-                   const FaceUntrusted& untrusted);
+                   const FaceUntrusted& untrusted, const core::FaceDisplacementNoise& noise = {});
     // The features of faces never added are not measured (naming the face); cold values and
     // verdicts for all.
     PartMeasurement finish();

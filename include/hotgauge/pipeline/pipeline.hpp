@@ -40,6 +40,9 @@ struct FaceCompensationSummary {
     std::int64_t n_degraded = 0;
     double peak_mm = 0, rms_mm = 0, rate_hz = 0;
     std::vector<core::UntrustedProfiles> untrusted;  // the profiles it could not follow
+    // Its own error (compensate::FaceCompensation): the accelerometer's noise density read off
+    // the record, and the σ of the displacement error it leaves, per world axis; 0: not known.
+    std::array<double, 3> accel_noise_ug{0, 0, 0}, drift_sigma_mm{0, 0, 0};
 };
 
 // What was acquired on one face: enough for an engineer to judge the data before the numbers.

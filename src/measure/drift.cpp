@@ -1,0 +1,55 @@
+#include "drift.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace hotgauge::measure::detail {
+
+void DriftSum::add(const FaceFrame& fr, std::int64_t k, const Eigen::Vector3d& w_part) {
+    const core::DisplacementNoise* noise = fr.noise;
+    if (!noise || !noise->known() || k < 0 || k >= fr.n) return;
+    auto it =
+        std::find_if(faces_.begin(), faces_.end(), [&](const Face& f) { return f.fr == &fr; });
+    if (it == faces_.end()) {
+        // M = R_part_world · R_world_camera, so R_world_part = R_world_camera · Mᵀ.
+        faces_.push_back({&fr, fr.scan->T_world_camera.linear() * fr.M.transpose(), {}});
+        it = faces_.end() - 1;
+    }
+    const auto& t = fr.scan->profile_times_ns;
+    const double s = 1e-9 * static_cast<double>(t[static_cast<std::size_t>(k)] - t.front());
+    const auto bin = static_cast<std::size_t>(std::lround(std::max(0.0, s) / noise->lag_s));
+    if (it->bins.size() <= bin) it->bins.resize(bin + 1, Eigen::Vector3d::Zero());
+    it->bins[bin] += it->R_world_part * w_part;
+}
+
+double DriftSum::u() const {
+    double var = 0;
+    for (const Face& f : faces_) {
+        const auto& acov = f.fr->noise->acov_mm2;
+        const std::size_t n = f.bins.size();
+        for (int a = 0; a < 3; ++a) {
+            const auto& c = acov[static_cast<std::size_t>(a)];
+            for (std::size_t i = 0; i < n; ++i) {
+                const double wi = f.bins[i][a];
+                if (wi == 0.0) continue;
+                for (std::size_t j = 0; j < n; ++j) {
+                    const std::size_t lag = i > j ? i - j : j - i;
+                    if (lag < c.size()) var += wi * f.bins[j][a] * c[lag];
+                }
+            }
+        }
+    }
+    return std::sqrt(std::max(0.0, var));
+}
+
+void add_plane(DriftSum& d, const std::vector<const FaceFrame*>& frames,
+               const std::vector<std::int64_t>& keys, const Eigen::Vector3d& w) {
+    if (keys.empty()) return;
+    const Eigen::Vector3d each = w / static_cast<double>(keys.size());
+    for (const std::int64_t key : keys) {
+        const auto face = static_cast<std::size_t>(key >> 32);
+        if (face < frames.size()) d.add(*frames[face], key & 0xffffffff, each);
+    }
+}
+
+}  // namespace hotgauge::measure::detail

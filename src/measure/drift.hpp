@@ -1,0 +1,37 @@
+#pragma once
+// The vibration compensation's own error in a feature (docs/measurement.md "Uncertainty",
+// docs/compensation.md "Its own error"): the accelerometer's noise, integrated twice, leaves each
+// face's displacement wrong by a slowly varying e(t) (core::DisplacementNoise), a few
+// micrometres that stay for a few hundred milliseconds. A fit does not see it: it moves whole
+// stretches of profiles together.
+#include <Eigen/Core>
+#include <vector>
+
+#include "frame.hpp"
+
+namespace hotgauge::measure::detail {
+
+// A feature that is, to first order, a weighted sum Σ w_i·p_i of its samples' positions (part
+// frame) is off by Σ w_i·e(t_i): e of the sample's face at its profile's time, the faces' errors
+// independent of each other. add() takes the weights profile by profile; u() is the standard
+// deviation of the sum, 0 when no face has a known noise model.
+class DriftSum {
+  public:
+    void add(const FaceFrame& fr, std::int64_t profile, const Eigen::Vector3d& w_part);
+    double u() const;
+
+  private:
+    struct Face {
+        const FaceFrame* fr;
+        Eigen::Matrix3d R_world_part;
+        std::vector<Eigen::Vector3d> bins;  // world weights per lag_s of the face's time
+    };
+    std::vector<Face> faces_;
+};
+
+// A plane's inliers as fit_level_plane keeps them (`keys`: face index in `frames` << 32 |
+// profile): their mean moves by the mean of their e, `w` along it.
+void add_plane(DriftSum& d, const std::vector<const FaceFrame*>& frames,
+               const std::vector<std::int64_t>& keys, const Eigen::Vector3d& w);
+
+}  // namespace hotgauge::measure::detail
