@@ -101,6 +101,36 @@ TEST(CornerProfile, NoisySamplesKeepTheCornerWithinItsUncertainty) {
     EXPECT_GE(covered, 8);  // k = 2
 }
 
+// A wall the plane's sensor loses (only the plane and the fillet seen): fitted once at the
+// drawing's draft, then refitted from there with the draft the side scans give (refit_draft),
+// it lands where a whole fit with that draft does, and on the true corner.
+TEST(CornerProfile, ARefitWithTheSideDraftEqualsAWholeFit) {
+    std::mt19937_64 rng(17);
+    for (const Case& k : {Case{1.0, 2.6, 1.8}, Case{1.0, 1.1, 2.3}, Case{-1.0, 2.9, 1.2}}) {
+        const CornerModel truth{{0.05, -0.03}, 31.6, std::tan(k.t_deg * kDeg), k.rho};
+        auto pts = samples(truth, k.side, 30000, 0.0, rng);
+        std::erase_if(pts, [&](const CornerPoint& p) { return p.h < -(k.rho + 0.1); });
+        for (std::size_t q = 0; q < pts.size(); ++q) pts[q].profile = static_cast<int>(q % 97);
+        CornerPrior drawing{std::tan(3.0 * kDeg), 2.5};
+        drawing.fix_draft = true;
+        const CornerModel start{{0.0, 0.0}, truth.radius + 0.1, drawing.t_mean(), 1.25};
+        const CornerFit held = fit_corner(pts, k.side, start, drawing);
+        CornerPrior side = drawing;
+        side.t_known = truth.t;
+        side.t_known_u = 1e-4;
+        const CornerFit refit = refit_draft(pts, k.side, held, side);
+        const CornerFit whole = fit_corner(pts, k.side, start, side);
+        std::printf("draft %.1f°: at the drawing's %+.4f mm, refit %+.6f, whole fit %+.6f\n",
+                    k.t_deg, held.m.radius - truth.radius, refit.m.radius - truth.radius,
+                    whole.m.radius - truth.radius);
+        EXPECT_GT(std::abs(held.m.radius - truth.radius), 0.005);  // the draft matters here
+        EXPECT_NEAR(refit.m.radius, whole.m.radius, 2e-5);
+        EXPECT_NEAR(refit.m.radius, truth.radius, 5e-4);
+        EXPECT_GE(refit.u_radius, held.u_jackknife);
+        EXPECT_FALSE(refit.radial.empty());
+    }
+}
+
 TEST(CornerProfile, ASharpVerticalEdgeFitsWithoutAFillet) {
     std::mt19937_64 rng(3);
     const CornerModel truth{{0.0, 0.0}, 12.15, 0.0, 0.0};

@@ -4,6 +4,7 @@
 #include "corner.hpp"
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -183,13 +184,13 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
             if (!use[q]) continue;
             Vec7 g;
             const double e = residual(from(v), side, pts[q], &g, nullptr);
-            A.selfadjointView<Eigen::Lower>().rankUpdate(g);
+            A.noalias() += g * g.transpose();  // fixed-size: far faster than rankUpdate here
             b += g * e;
             s2 += e * e;
             ++cnt;
         }
         // Every weight-th sample is fitted (a thinned set), each standing for `weight` of them.
-        A = weight * Mat7(A.selfadjointView<Eigen::Lower>());
+        A *= weight;
         b *= weight;
         s2 *= weight;
         if (sse) *sse = s2;
@@ -203,6 +204,8 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
     double sse = 0;
     std::size_t n = 0;
     cost(x, &A, &b, &sse, &n);
+    Mat7 A_raw = A;  // at x, without the priors: the normal matrix at the solution, at the end
+    double sse_raw = sse;
     const double sigma2 = std::max(sse / static_cast<double>(std::max<std::size_t>(n, 1)), 1e-6);
     auto with_prior = [&](const Vec7& v, Mat7& M, Vec7& g, double& c) {
         for (const Prior1& p : priors) {
@@ -227,12 +230,15 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
         Vec7 bn;
         double c1 = 0;
         cost(xn, &An, &bn, &c1, &n);
+        const Mat7 An_raw = An;
+        const double c1_raw = c1;
         with_prior(xn, An, bn, c1);
         if (c1 < c0) {
             // A nanometre, or a cost that no longer moves: converged (the results then agree
             // to 0.001 µm with a 100× tighter tolerance).
             const bool done = c0 - c1 < 1e-9 * c0 || step.norm() < 1e-6;
             x = xn, A = An, b = bn, c0 = c1;
+            A_raw = An_raw, sse_raw = c1_raw;
             lambda = std::max(lambda * 0.3, 1e-9);
             if (done) break;
         } else {
@@ -242,8 +248,8 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
     }
     // The normal matrix at the solution with the priors in it: where the samples do not fix the
     // draft (a wall out of view), its covariance is the prior's, and u says what that costs.
-    cost(x, &A, nullptr, &sse, &n);
-    const double rms2 = sse / static_cast<double>(std::max<std::size_t>(n, 1));
+    A = A_raw;
+    const double rms2 = sse_raw / static_cast<double>(std::max<std::size_t>(n, 1));
     for (const Prior1& p : priors)
         A(p.j, p.j) += p.hold_u * std::max(rms2, 1e-6) / (p.sigma * p.sigma);
     return {x, A, std::sqrt(rms2)};
@@ -281,34 +287,38 @@ double corner_residual(const CornerModel& m, double side, const CornerPoint& p, 
     return residual(m, side, p, nullptr, part);
 }
 
-CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const CornerModel& start,
-                     const CornerPrior& prior, bool jackknife) {
-    // The fit runs on an even thinning to kFitSamples (a corner's seven parameters need far fewer
-    // than the 10 000-50 000 samples near it; each fitted one stands for `stride`, so u is that
-    // of all); inliers and counts are taken on all of them.
-    constexpr std::size_t kFitSamples = 6000;
-    const std::size_t stride = std::max<std::size_t>(1, pts.size() / kFitSamples);
-    std::vector<char> use(pts.size(), 0);
-    for (std::size_t q = 0; q < pts.size(); q += stride) use[q] = 1;
-    Vec7 x = to(start);
-    if (prior.depth <= 0.0) {
-        x[5] = x[6] = 0.0;  // no far corner
-    } else {
-        if (x[5] <= 0.0) x[5] = 0.5 * prior.rho_max;
-        if (x[6] <= 0.0) x[6] = prior.depth;
-    }
-    Solve s;
-    for (int round = 0; round < 3; ++round) {
-        s = solve(pts, use, side, x, prior, static_cast<double>(stride));
-        x = s.x;
-        const double thr = std::max(3.0 * s.rms, 0.02);
-        for (std::size_t q = 0; q < pts.size(); ++q)
-            use[q] = q % stride == 0 &&
-                     std::abs(residual(from(x), side, pts[q], nullptr, nullptr)) <= thr;
-    }
-    const double thr = std::max(3.0 * s.rms, 0.02);
+namespace {
+
+// The fit runs on an even thinning to kFitSamples (a corner's seven parameters need far fewer
+// than the 10 000-50 000 samples near it; each fitted one stands for `stride`, so u is that of
+// all); inliers and counts are taken on all of them.
+constexpr std::size_t kFitSamples = 6000;
+std::size_t thinning(const std::vector<CornerPoint>& pts) {
+    return std::max<std::size_t>(1, pts.size() / kFitSamples);
+}
+double inlier_threshold(double rms) { return std::max(3.0 * rms, 0.02); }
+
+// The radius's standard uncertainty from the normal matrix; infinite where the samples do not fix
+// it (its smallest eigenvalue 1e-14 of its largest, or less).
+double radius_u(const Solve& s) {
+    const Eigen::SelfAdjointEigenSolver<Mat7> eig(s.JtJ);
+    const auto& ev = eig.eigenvalues();  // ascending
+    if (eig.info() != Eigen::Success || !(ev[0] > 1e-14 * ev[6]))
+        return std::numeric_limits<double>::infinity();
+    const Mat7 cov = eig.eigenvectors() * ev.cwiseInverse().asDiagonal() *
+                     eig.eigenvectors().transpose() * s.rms * s.rms;
+    return std::sqrt(std::max(0.0, cov(2, 2)));
+}
+
+// The fit `s` on the thinned inliers `use` as a CornerFit: inliers of every sample by the part of
+// the profile, sectors, u (formal, or the jackknife's when `jackknife` and larger) and, for a fit
+// whose u is `reported`, each profile's radial weight.
+CornerFit summarize(const std::vector<CornerPoint>& pts, double side, const Solve& s,
+                    const std::vector<char>& use, const CornerPrior& prior, bool reported,
+                    bool jackknife) {
+    const double thr = inlier_threshold(s.rms);
     CornerFit out;
-    out.m = from(x);
+    out.m = from(s.x);
     out.rms = s.rms;
     std::vector<double> sum(8, 0.0);
     std::vector<int> cnt(8, 0);
@@ -319,7 +329,7 @@ CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const Cor
         (part == 0 ? out.n_plane : part == 1 ? out.n_arc : part == 2 ? out.n_wall : out.n_far)++;
         if (part == 0 || part >= 3) continue;  // the corner's circle: its fillet and wall
         const Eigen::Vector2d d = pts[q].q - out.m.centre;
-        if (jackknife) {  // a fit whose u is reported
+        if (reported) {
             if (out.radial.empty() || out.radial.back().first != pts[q].profile)
                 out.radial.emplace_back(pts[q].profile, Eigen::Vector2d::Zero());
             out.radial.back().second += d.normalized();
@@ -343,14 +353,56 @@ CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const Cor
     for (int sec = 0; sec < 8; ++sec)
         if (cnt[sec] >= std::max<std::int64_t>(10, n_profile / 32))
             out.sector_radius.push_back(out.m.radius + sum[sec] / cnt[sec]);
-    const Eigen::LDLT<Mat7> ldlt(s.JtJ);
-    out.u_radius = std::numeric_limits<double>::infinity();  // the samples do not fix it
-    if (ldlt.info() == Eigen::Success && ldlt.rcond() > 1e-14) {
-        const Mat7 cov = ldlt.solve(Mat7::Identity()) * s.rms * s.rms;
-        out.u_radius = std::sqrt(std::max(0.0, cov(2, 2)));
-        if (jackknife)
-            out.u_radius = std::max(out.u_radius, jackknife_u(pts, use, side, x, prior, stride));
+    out.u_radius = radius_u(s);
+    if (std::isfinite(out.u_radius)) {
+        if (jackknife) {
+            out.u_jackknife = jackknife_u(pts, use, side, s.x, prior, thinning(pts));
+            out.u_radius = std::max(out.u_radius, out.u_jackknife);
+        }
     }
+    return out;
+}
+
+}  // namespace
+
+CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const CornerModel& start,
+                     const CornerPrior& prior, bool jackknife) {
+    const std::size_t stride = thinning(pts);
+    std::vector<char> use(pts.size(), 0);
+    for (std::size_t q = 0; q < pts.size(); q += stride) use[q] = 1;
+    Vec7 x = to(start);
+    if (prior.depth <= 0.0) {
+        x[5] = x[6] = 0.0;  // no far corner
+    } else {
+        if (x[5] <= 0.0) x[5] = 0.5 * prior.rho_max;
+        if (x[6] <= 0.0) x[6] = prior.depth;
+    }
+    Solve s;
+    for (int round = 0; round < 3; ++round) {
+        s = solve(pts, use, side, x, prior, static_cast<double>(stride));
+        x = s.x;
+        const double thr = inlier_threshold(s.rms);
+        for (std::size_t q = 0; q < pts.size(); ++q)
+            use[q] = q % stride == 0 &&
+                     std::abs(residual(from(x), side, pts[q], nullptr, nullptr)) <= thr;
+    }
+    return summarize(pts, side, s, use, prior, jackknife, jackknife);
+}
+
+CornerFit refit_draft(const std::vector<CornerPoint>& pts, double side, const CornerFit& held,
+                      const CornerPrior& prior) {
+    const std::size_t stride = thinning(pts);
+    const double thr = inlier_threshold(held.rms);
+    std::vector<char> use(pts.size(), 0);
+    for (std::size_t q = 0; q < pts.size(); q += stride)
+        use[q] = std::abs(residual(held.m, side, pts[q], nullptr, nullptr)) <= thr;
+    Vec7 x = to(held.m);
+    x[3] = prior.t_mean();
+    const Solve s = solve(pts, use, side, x, prior, static_cast<double>(stride));
+    CornerFit out = summarize(pts, side, s, use, prior, true, false);
+    // The jackknife measures the profiles' shared errors, which a change of draft leaves alone.
+    out.u_jackknife = held.u_jackknife;
+    out.u_radius = std::max(out.u_radius, held.u_jackknife);
     return out;
 }
 

@@ -81,6 +81,7 @@ struct CornerFit {
     // Standard uncertainty of `radius`: σ²·(JᵀJ)⁻¹ (priors included), or, when larger, the
     // jackknife's over groups of profiles.
     double u_radius = 0;
+    double u_jackknife = 0;  // the jackknife's share of it (0: not run)
     // What the radius moves by when the model's window moves (a far corner: the far level taken
     // 1.5 or 4 mm beyond its fillet): its shape is not quite the drawing's. 0 when not tried.
     double u_model = 0;
@@ -106,6 +107,14 @@ struct CornerFit {
 CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const CornerModel& start,
                      const CornerPrior& prior, bool jackknife = true);
 
+// `held` (a fit of `pts` with its draft held) again with the draft `prior` holds: from its
+// solution and on its inliers, one solve (a few steps: the draft moves the corner by tens of
+// micrometres). Its u keeps `held`'s jackknife. The daemon's last face, which brings a side
+// scan's draft, costs this instead of a whole fit (PartMeasurer, docs/measurement.md "In two
+// steps").
+CornerFit refit_draft(const std::vector<CornerPoint>& pts, double side, const CornerFit& held,
+                      const CornerPrior& prior);
+
 // The distance of a sample from the profile, and where it lies (0 plane, 1 fillet, 2 wall, 3 far
 // fillet, 4 far level).
 double corner_residual(const CornerModel& m, double side, const CornerPoint& p, int* part);
@@ -124,6 +133,10 @@ struct CornerMemo {
     bool wall_unseen = false;
     CornerModel start;
     double s_in = 0, depth = 0, step = 0;
+    // ... and so refitted at the drawing's draft, with its samples: what a draft from the wall's
+    // faces starts from (refit_draft), whichever of them are in.
+    std::optional<CornerFit> held;
+    std::vector<CornerPoint> held_pts;
 };
 
 // Diameter `f` at its theoretical sharp corner when its edge is filleted or its wall seen: the

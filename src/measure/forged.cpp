@@ -211,10 +211,13 @@ double drift_u(const std::vector<const FaceFrame*>& frames, const EdgePlane& ep,
 // sensors lose a 1-3° wall at grazing incidence), from their last free fit. Its draft is held at
 // the slope the side faces see, when they see the wall; else, on a short step whose far corner
 // is seen, the wall is the common tangent of its two fillets, which fix its draft; else the draft
-// is held at the drawing's middle. What a held draft may be off goes into u.
+// is held at the drawing's middle. What a held draft may be off goes into u. The fit at the
+// drawing's middle is kept in `memo`, and a side draft refits from it (refit_draft): the last
+// side scan costs a few steps per diameter, and the value does not depend on which side scans
+// were in when the corner was first fitted.
 CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
                           const std::vector<const FaceFrame*>& wall_frames, const EdgePlane& ep,
-                          double side, const CornerMemo& memo, CornerPrior& prior) {
+                          double side, CornerMemo& memo, CornerPrior& prior) {
     const CornerModel& m = memo.start;
     const double depth = memo.depth, step = memo.step;
     const auto d = wall_draft(wall_frames, ep, side, m, depth, prior.t_max);
@@ -244,14 +247,17 @@ CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
         }
         prior.depth = 0.0;
     }
-    const auto pts = corner_points(frames, ep, side, m.centre, m.radius, memo.s_in,
-                                   0.5 + prior.t_max * depth, depth);
     prior.fix_draft = true;
-    if (d) {
-        prior.t_known = d->t;
-        prior.t_known_u = d->u;
+    if (!memo.held) {  // at the drawing's draft: the same start whichever wall faces are in
+        memo.held_pts = corner_points(frames, ep, side, m.centre, m.radius, memo.s_in,
+                                      0.5 + prior.t_max * depth, depth);
+        memo.held =
+            fit_corner(memo.held_pts, side, {m.centre, m.radius, prior.t_mean(), m.rho}, prior);
     }
-    return fit_corner(pts, side, {m.centre, m.radius, prior.t_mean(), m.rho}, prior);
+    if (!d) return *memo.held;
+    prior.t_known = d->t;
+    prior.t_known_u = d->u;
+    return refit_draft(memo.held_pts, side, *memo.held, prior);
 }
 
 // The corner's free fit on its plane's faces (they see the plane, the fillet and perhaps the
