@@ -802,14 +802,18 @@ TEST_P(PartRunSteps, AnyGroupingOfTheFacesIsMeasurePart) {
     ASSERT_TRUE(whole.match && whole.match->found);
     const Eigen::Isometry3d& T = whole.match->T_world_part;
     const auto& u = whole.displacement_mm;
-    const auto all = measure::measure_part(env().recipe, s.recording, T, u);
+    core::FaceDisplacementNoise noise;  // the compensation's own error, in every u
+    for (const auto& face : s.recording.faces)
+        noise[face.name] = compensate::compensate_face(face, {}).noise;
+    ASSERT_TRUE(noise.begin()->second.known());
+    const auto all = measure::measure_part(env().recipe, s.recording, T, u, {}, {}, noise);
     ASSERT_EQ(s.recording.faces.size(), 4u);
     for (const std::vector<std::size_t>& ends :
          {std::vector<std::size_t>{1, 2, 4}, {1, 2, 3, 4}, {2, 3, 4}, {3, 4}}) {
         measure::PartMeasurer m(env().recipe, s.recording, T);
         std::size_t first = 0;
         for (const std::size_t end : ends) {
-            m.add_faces(first, end, u, {});
+            m.add_faces(first, end, u, {}, noise);
             first = end;
         }
         expect_same(m.finish(), all, std::to_string(ends.size()) + " groups");
@@ -960,4 +964,29 @@ TEST(CompensationNoise, PredictsWhatTheIntegratorMakesOfWhiteNoise) {
     EXPECT_NEAR(std::sqrt(var), std::sqrt(model.cov(2, 0.0)), 0.08 * std::sqrt(var));
     EXPECT_NEAR(cov1, model.cov(2, 0.1), 0.1 * var);
     EXPECT_NEAR(cov3, model.cov(2, 0.3), 0.1 * var);
+}
+
+// A face whose accelerometer timestamps jitter (1.6 % of the period on the independent
+// recordings): the density is read off the samples as they came, not off the grid, whose
+// interpolation between jittered timestamps halves the top band's power; a 50 ms hole in the
+// record is left out, not read as a quiet stretch.
+TEST(CompensationNoise, JitteredTimestampsAndAHoleDoNotHideTheNoise) {
+    const double fs = 2000.0, density_ug = 25.0;
+    core::FaceScan face;
+    face.name = "top";
+    for (int k = 0; k < 1200; ++k) face.profile_times_ns.push_back(1'000'000'000 + k * 1'000'000LL);
+    const auto a = noisy_accel(density_ug, fs, 6400, 5, true);
+    std::mt19937_64 rng(9);
+    std::normal_distribution<double> jitter(0.0, 8000.0);  // ns
+    for (std::size_t j = 0; j < a.size(); ++j) {
+        if (j >= 3000 && j < 3100) continue;  // the hole
+        face.accel_times_ns.push_back(static_cast<std::int64_t>(j) * 500'000 +
+                                      std::llround(jitter(rng)));
+        for (const double v : {a[j], 0.3 * a[j] - 2.9, 0.0})
+            face.accel_mps2.push_back(static_cast<float>(v));
+    }
+    const auto fc = compensate::compensate_face(face, {});
+    ASSERT_TRUE(fc.noise.known());
+    EXPECT_NEAR(fc.accel_noise_ug[0], density_ug, 0.1 * density_ug);
+    EXPECT_NEAR(fc.accel_noise_ug[1], 0.3 * density_ug, 0.1 * 0.3 * density_ug);
 }

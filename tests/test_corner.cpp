@@ -126,8 +126,10 @@ TEST(CornerProfile, ARefitWithTheSideDraftEqualsAWholeFit) {
         EXPECT_GT(std::abs(held.m.radius - truth.radius), 0.005);  // the draft matters here
         EXPECT_NEAR(refit.m.radius, whole.m.radius, 2e-5);
         EXPECT_NEAR(refit.m.radius, truth.radius, 5e-4);
-        EXPECT_GE(refit.u_radius, held.u_jackknife);
-        EXPECT_FALSE(refit.radial.empty());
+        // Exact samples: the held draft's u (the prior's, 1e-4) is gone, and what is left is the
+        // jackknife kept from the fit at the drawing's draft (its misfit: 0.01-0.04 µm).
+        EXPECT_LT(refit.u_radius, 1e-4);
+        EXPECT_EQ(refit.radial.size(), whole.radial.size());
     }
 }
 
@@ -270,13 +272,33 @@ TEST(CompensationDrift, SumsOverProfilesWithTheErrorsCovariance) {
         EXPECT_NEAR(d.u(), std::sqrt(8.0) * 1e-3, 1e-12);
     }
     {
-        // The part turned upside down in the world (M = R_part_world · R_world_camera): a
-        // part-frame z weight is world −z, the same σ; a part-frame x weight stays off z.
-        fr.M = Eigen::AngleAxisd(std::numbers::pi, Eigen::Vector3d::UnitX()).toRotationMatrix();
+        // M = R_part_world · R_world_camera. The part turned so that its y is the world's z,
+        // seen by a camera turned about z: a part-frame y weight is world z, its z weight is not.
+        const Eigen::Matrix3d R_part_world =
+            Eigen::AngleAxisd(-std::numbers::pi / 2, Eigen::Vector3d::UnitX()).toRotationMatrix();
+        ASSERT_TRUE((R_part_world.transpose() * Eigen::Vector3d::UnitY()).isApprox(z));
+        const Eigen::Matrix3d R_world_camera =
+            Eigen::AngleAxisd(0.7, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+        scan.T_world_camera.linear() = R_world_camera;
+        fr.M = R_part_world * R_world_camera;
         measure::detail::DriftSum d;
-        d.add(fr, 2, 0.5 * z);
-        d.add(fr, 3, Eigen::Vector3d::UnitX());
+        d.add(fr, 2, 0.5 * Eigen::Vector3d::UnitY());
+        d.add(fr, 3, z);
         EXPECT_NEAR(d.u(), 1e-3, 1e-12);
+    }
+    {
+        // A diameter (add_radial): 4 samples of one profile, all pointing along e1 = part y =
+        // world z: the diameter moves by twice their error, 2σ; a full ring of them, not at all.
+        measure::detail::DriftSum d;
+        const Eigen::Vector3d e1 = Eigen::Vector3d::UnitY(), e2 = Eigen::Vector3d::UnitX();
+        measure::detail::add_radial(d, fr, 2, Eigen::Vector2d(4.0, 0.0), e1, e2, 4.0);
+        EXPECT_NEAR(d.u(), 4e-3, 1e-12);
+        measure::detail::DriftSum ring;
+        for (int q = 0; q < 8; ++q) {
+            const double a = q * std::numbers::pi / 4;
+            measure::detail::add_radial(ring, fr, 2, {std::cos(a), std::sin(a)}, e1, e2, 8.0);
+        }
+        EXPECT_NEAR(ring.u(), 0.0, 1e-9);
     }
     {
         measure::detail::DriftSum d;  // a face without a noise model adds nothing

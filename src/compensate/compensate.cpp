@@ -82,23 +82,33 @@ std::vector<double> integrate_twice(const std::vector<double>& accel, double rat
 }
 
 std::array<double, 3> accel_noise_density(const std::array<std::vector<double>, 3>& accel_world,
-                                          double rate_hz) {
-    constexpr int kSegment = 256;
+                                          double rate_hz, const std::vector<std::size_t>& breaks) {
+    constexpr std::size_t kSegment = 256;
     std::array<double, 3> out{0, 0, 0};
-    const auto n = static_cast<int>(accel_world[0].size());
-    if (n < 4 * kSegment || !(rate_hz > 0)) return out;
+    const std::size_t n = accel_world[0].size();
+    if (!(rate_hz > 0)) return out;
     cv::Mat window(1, kSegment, CV_64F);
     double w2 = 0;
-    for (int i = 0; i < kSegment; ++i) {
-        const double w = 0.5 * (1.0 - std::cos(2.0 * std::numbers::pi * i / kSegment));
-        window.at<double>(i) = w;
+    for (std::size_t i = 0; i < kSegment; ++i) {
+        const double w = 0.5 * (1.0 - std::cos(2.0 * std::numbers::pi * static_cast<double>(i) /
+                                               static_cast<double>(kSegment)));
+        window.at<double>(static_cast<int>(i)) = w;
         w2 += w * w;
     }
+    // Segments overlap by half and lie within the runs between breaks.
+    std::vector<std::size_t> starts;
+    std::size_t run = 0;
+    for (std::size_t b = 0; b <= breaks.size(); ++b) {
+        const std::size_t end = b < breaks.size() ? std::min(breaks[b] + 1, n) : n;
+        for (std::size_t s0 = run; s0 + kSegment <= end; s0 += kSegment / 2) starts.push_back(s0);
+        run = std::max(run, end);
+    }
+    if (starts.size() < 4) return out;  // too little record to tell
     const int k_lo = static_cast<int>(std::ceil(0.3 * kSegment)),
               k_hi = static_cast<int>(0.45 * kSegment);
     for (int a = 0; a < 3; ++a) {
         std::vector<double> p;
-        for (int s0 = 0; s0 + kSegment <= n; s0 += kSegment / 2) {
+        for (const std::size_t s0 : starts) {
             cv::Mat x(1, kSegment, CV_64F, const_cast<double*>(accel_world[a].data() + s0));
             cv::Mat X;
             cv::dft(x.mul(window), X, cv::DFT_COMPLEX_OUTPUT);
@@ -115,13 +125,15 @@ std::array<double, 3> accel_noise_density(const std::array<std::vector<double>, 
 
 core::DisplacementNoise displacement_noise(const std::array<double, 3>& density_si,
                                            const CompensationConfig& c) {
-    constexpr double kLagS = 0.01, kMaxLagS = 2.5;
+    constexpr double kLagS = 0.01;
     constexpr int kFreqs = 800;
     // hp²/(2πf)⁴ peaks near the corner: a log grid from fc/20 to 40·fc holds all but 1e-5 of it.
     const double fc = c.highpass_hz, lo = std::log(fc / 20.0), hi = std::log(40.0 * fc);
     core::DisplacementNoise out;
     if (!(fc > 0)) return out;
-    const int lags = static_cast<int>(kMaxLagS / kLagS) + 1;
+    // Past the error's correlation (it lasts about a period of the corner), so that the sums
+    // over it stay a variance.
+    const int lags = static_cast<int>(std::max(2.5, 4.0 / fc) / kLagS) + 1;
     std::vector<double> shape(static_cast<std::size_t>(lags), 0.0);
     for (int j = 0; j < kFreqs; ++j) {
         const double f = std::exp(lo + (hi - lo) * (j + 0.5) / kFreqs);
@@ -333,6 +345,25 @@ std::vector<core::UntrustedProfiles> untrusted_runs(const core::FaceScan& face,
     return out;
 }
 
+// The compensation's own error (accel_noise_density, displacement_noise) from the samples as they
+// came, not the grid: interpolating between jittered timestamps damps the top band (a 1.6 %
+// jitter on the independent recordings). Segments stop at the gaps.
+void set_noise(const Samples& smp, const Eigen::Matrix3d& R_world_accel, double period,
+               const CompensationConfig& c, FaceCompensation& out) {
+    std::array<std::vector<double>, 3> raw;
+    std::vector<std::size_t> breaks;
+    for (std::size_t j = 0; j < smp.a.size(); ++j) {
+        const Eigen::Vector3d v = R_world_accel * smp.a[j];
+        for (int k = 0; k < 3; ++k) raw[k].push_back(v[k]);
+        if (j + 1 < smp.t.size() && smp.t[j + 1] - smp.t[j] > c.gap_factor * period)
+            breaks.push_back(j);
+    }
+    const auto density = accel_noise_density(raw, 1.0 / period, breaks);
+    if (!(density[0] > 0)) return;  // too little record: not known
+    for (int a = 0; a < 3; ++a) out.accel_noise_ug[a] = std::sqrt(density[a]) / kG * 1e6;
+    out.noise = displacement_noise(density, c);
+}
+
 }  // namespace
 
 FaceCompensation compensate_face(const core::FaceScan& face, const CompensationConfig& c) {
@@ -402,9 +433,7 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
         if (b.t1 > b.t0 && g1 >= g0) grid_gaps.push_back({g0, g1});
     }
     const auto u = integrate_across_gaps(grid, out.rate_hz, grid_gaps, c);
-    const auto density = accel_noise_density(grid, out.rate_hz);
-    for (int a = 0; a < 3; ++a) out.accel_noise_ug[a] = std::sqrt(density[a]) / kG * 1e6;
-    out.noise = displacement_noise(density, c);
+    set_noise(smp, face.T_world_camera.linear() * face.R_camera_accel, period, c, out);
 
     const std::size_t n = u[0].size();
     double sum2 = 0.0;

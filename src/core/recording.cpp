@@ -17,7 +17,7 @@ double DisplacementNoise::cov(int axis, double tau_s) const {
     if (!known()) return 0.0;
     const double x = std::abs(tau_s) / lag_s;
     const auto i = static_cast<std::size_t>(x);
-    if (i + 1 >= c.size()) return 0.0;
+    if (i + 1 >= c.size()) return i + 1 == c.size() ? c[i] : 0.0;
     const double f = x - static_cast<double>(i);
     return c[i] + f * (c[i + 1] - c[i]);
 }

@@ -94,7 +94,7 @@ struct CornerFit {
     std::vector<double> sector_radius;                // the radius from each sector's points
     // Per profile (CornerPoint::profile), the sum of the unit vectors away from the centre of
     // its fillet and wall inliers: how a shift of that profile moves the radius (drift.hpp).
-    // Only on a fit with the jackknife (one whose u is reported).
+    // Only on a fit whose u is reported (fit_corner with the jackknife, refit_draft).
     std::vector<std::pair<std::int64_t, Eigen::Vector2d>> radial;
 };
 

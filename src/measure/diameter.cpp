@@ -153,11 +153,10 @@ double edge_drift_u(const std::vector<const FaceFrame*>& frames, const EdgePlane
                     const FineEdge& fe, const Eigen::Vector2d& centre) {
     if (fe.brackets.empty()) return 0.0;
     DriftSum d;
-    const double w = 2.0 / static_cast<double>(fe.brackets.size());
-    for (std::size_t q = 0; q < fe.brackets.size(); ++q) {
-        const Eigen::Vector2d out = (fe.midpoints[q] - centre).normalized();
-        d.add(*frames[fe.at[q].first], fe.at[q].second, w * (out.x() * ep.e1 + out.y() * ep.e2));
-    }
+    const auto n = static_cast<double>(fe.brackets.size());
+    for (std::size_t q = 0; q < fe.brackets.size(); ++q)
+        add_radial(d, *frames[fe.at[q].first], fe.at[q].second,
+                   (fe.midpoints[q] - centre).normalized(), ep.e1, ep.e2, n);
     return d.u();
 }
 

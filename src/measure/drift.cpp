@@ -32,10 +32,10 @@ double DriftSum::u() const {
             for (std::size_t i = 0; i < n; ++i) {
                 const double wi = f.bins[i][a];
                 if (wi == 0.0) continue;
-                for (std::size_t j = 0; j < n; ++j) {
-                    const std::size_t lag = i > j ? i - j : j - i;
-                    if (lag < c.size()) var += wi * f.bins[j][a] * c[lag];
-                }
+                const std::size_t j0 = i + 1 > c.size() ? i + 1 - c.size() : 0;
+                const std::size_t j1 = std::min(n, i + c.size());
+                for (std::size_t j = j0; j < j1; ++j)
+                    var += wi * f.bins[j][a] * c[i > j ? i - j : j - i];
             }
         }
     }
@@ -50,6 +50,11 @@ void add_plane(DriftSum& d, const std::vector<const FaceFrame*>& frames,
         const auto face = static_cast<std::size_t>(key >> 32);
         if (face < frames.size()) d.add(*frames[face], key & 0xffffffff, each);
     }
+}
+
+void add_radial(DriftSum& d, const FaceFrame& fr, std::int64_t k, const Eigen::Vector2d& radial_sum,
+                const Eigen::Vector3d& e1, const Eigen::Vector3d& e2, double n) {
+    if (n > 0.0) d.add(fr, k, 2.0 / n * (radial_sum.x() * e1 + radial_sum.y() * e2));
 }
 
 }  // namespace hotgauge::measure::detail

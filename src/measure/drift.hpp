@@ -34,4 +34,10 @@ class DriftSum {
 void add_plane(DriftSum& d, const std::vector<const FaceFrame*>& frames,
                const std::vector<std::int64_t>& keys, const Eigen::Vector3d& w);
 
+// A diameter's samples of profile k of `fr`: `radial_sum`, the sum of their unit vectors away from
+// the circle's centre in the circle's plane (basis e1, e2, part frame), of `n` samples in all.
+// The radius moves by the mean of their errors along those vectors, the diameter by twice that.
+void add_radial(DriftSum& d, const FaceFrame& fr, std::int64_t k, const Eigen::Vector2d& radial_sum,
+                const Eigen::Vector3d& e1, const Eigen::Vector3d& e2, double n);
+
 }  // namespace hotgauge::measure::detail

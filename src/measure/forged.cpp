@@ -200,7 +200,7 @@ double drift_u(const std::vector<const FaceFrame*>& frames, const EdgePlane& ep,
     for (const auto& [key, sum] : fit.radial) {
         const auto face = static_cast<std::size_t>(key / kProfileKeyFace);
         if (key < 0 || face >= frames.size()) continue;
-        d.add(*frames[face], key % kProfileKeyFace, 2.0 / n * (sum.x() * ep.e1 + sum.y() * ep.e2));
+        add_radial(d, *frames[face], key % kProfileKeyFace, sum, ep.e1, ep.e2, n);
     }
     return d.u();
 }

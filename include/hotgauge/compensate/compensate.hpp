@@ -37,11 +37,15 @@ std::vector<double> integrate_twice(const std::vector<double>& accel, double rat
 
 // The accelerometer's noise density per world axis ((m/s²)²/Hz, one-sided), read off the
 // record's top band, [0.3, 0.45] × the rate, far above any press mode: the median of a
-// Hann-windowed periodogram of 256-sample segments over that band, over ln 2 (the median of an
-// exponential variable). A press blow's broadband burst is in few segments and the median
-// passes it by; what is left of it makes the density larger, never smaller.
+// Hann-windowed periodogram of 256-sample segments (overlapping by half, none across a break:
+// sample i and i + 1 for i in `breaks`, a gap) over that band, over ln 2 (the median of an
+// exponential variable). A press blow's broadband burst is in few segments and the median passes
+// it by; what is left of it makes the density larger. A sensor's own output filter rolling off in
+// that band would make it smaller: docs/compensation.md "Its own error". Zero when fewer than 4
+// segments fit.
 std::array<double, 3> accel_noise_density(const std::array<std::vector<double>, 3>& accel_world,
-                                          double rate_hz);
+                                          double rate_hz,
+                                          const std::vector<std::size_t>& breaks = {});
 
 // The displacement error that noise of density s_a leaves after integrate_twice: autocovariance
 // ∫ s_a·hp(f)²/(2πf)⁴·cos(2πfτ) df per world axis, at lags of 10 ms up to 2.5 s, in mm². White

@@ -76,6 +76,7 @@ struct DisplacementNoise {
     std::array<std::vector<double>, 3> acov_mm2;
     bool known() const { return lag_s > 0.0 && !acov_mm2[0].empty(); }
     // Covariance of e_axis(t) and e_axis(t + tau): linear between lags, 0 beyond the last.
+    // The lags reach past the error's correlation (4 / the high-pass corner, at least 2.5 s).
     double cov(int axis, double tau_s) const;
 };
 using FaceDisplacementNoise = std::map<std::string, DisplacementNoise>;

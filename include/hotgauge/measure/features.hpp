@@ -142,7 +142,7 @@ namespace hotgauge::measure {
 // (a forging's diameter as soon as its first face is, and again if a later face changes it:
 // docs/measurement.md "In two steps").
 // The same numbers as measure_part on the same inputs, whatever the grouping. `rec`, and the
-// scans, displacements and runs given to add_faces, must outlive the measurer.
+// scans, displacements, runs and noise given to add_faces, must outlive the measurer.
 class PartMeasurer {
   public:
     PartMeasurer(const core::Recipe& recipe, const core::Recording& rec,
