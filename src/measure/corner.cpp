@@ -160,6 +160,35 @@ struct Prior1 {
     int j;
     double mean, sigma, hold, hold_u;
 };
+// The normal equations of the thinned samples `use` at v (no priors): JᵀJ, Jᵀe and the sum of
+// squares, each fitted sample standing for `weight` of them (every weight-th is fitted); n, the
+// samples they stand for.
+struct Normal {
+    Mat7 A = Mat7::Zero();
+    Vec7 b = Vec7::Zero();
+    double sse = 0;
+    std::size_t n = 0;
+};
+Normal normal_equations(const std::vector<CornerPoint>& pts, const std::vector<char>& use,
+                        double side, const Vec7& v, double weight) {
+    Normal out;
+    std::size_t cnt = 0;
+    for (std::size_t q = 0; q < pts.size(); ++q) {
+        if (!use[q]) continue;
+        Vec7 g;
+        const double e = residual(from(v), side, pts[q], &g, nullptr);
+        out.A.noalias() += g * g.transpose();  // fixed-size: far faster than rankUpdate here
+        out.b += g * e;
+        out.sse += e * e;
+        ++cnt;
+    }
+    out.A *= weight;
+    out.b *= weight;
+    out.sse *= weight;
+    out.n = static_cast<std::size_t>(static_cast<double>(cnt) * weight);
+    return out;
+}
+
 Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, double side, Vec7 x,
             const CornerPrior& prior, double weight, int iterations = 30) {
     // The draft: weak (the middle of the drawing's range), or held (a wall out of view, its u
@@ -174,49 +203,26 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
          far_hold, far_hold},
         {6, prior.depth, kDepthSigmaMm, far_hold, far_hold},
     }};
-    double lambda = 1e-3;
-    auto cost = [&](const Vec7& v, Mat7* JtJ, Vec7* Jte, double* sse, std::size_t* n) {
-        Mat7 A = Mat7::Zero();
-        Vec7 b = Vec7::Zero();
-        double s2 = 0;
-        std::size_t cnt = 0;
-        for (std::size_t q = 0; q < pts.size(); ++q) {
-            if (!use[q]) continue;
-            Vec7 g;
-            const double e = residual(from(v), side, pts[q], &g, nullptr);
-            A.noalias() += g * g.transpose();  // fixed-size: far faster than rankUpdate here
-            b += g * e;
-            s2 += e * e;
-            ++cnt;
-        }
-        // Every weight-th sample is fitted (a thinned set), each standing for `weight` of them.
-        A *= weight;
-        b *= weight;
-        s2 *= weight;
-        if (sse) *sse = s2;
-        if (n) *n = static_cast<std::size_t>(static_cast<double>(cnt) * weight);
-        if (JtJ) *JtJ = A;
-        if (Jte) *Jte = b;
-        return s2;
-    };
-    Mat7 A;
-    Vec7 b;
-    double sse = 0;
-    std::size_t n = 0;
-    cost(x, &A, &b, &sse, &n);
-    Mat7 A_raw = A;  // at x, without the priors: the normal matrix at the solution, at the end
-    double sse_raw = sse;
-    const double sigma2 = std::max(sse / static_cast<double>(std::max<std::size_t>(n, 1)), 1e-6);
-    auto with_prior = [&](const Vec7& v, Mat7& M, Vec7& g, double& c) {
+    // The priors as more residuals: the normal equations and the cost at v with them.
+    double sigma2 = 0;
+    auto with_prior = [&](const Vec7& v, const Normal& m, Mat7& A, Vec7& b) {
+        A = m.A;
+        b = m.b;
+        double c = m.sse;
         for (const Prior1& p : priors) {
             const double w = p.hold * sigma2 / (p.sigma * p.sigma), d = v[p.j] - p.mean;
-            M(p.j, p.j) += w;
-            g[p.j] += w * d;
+            A(p.j, p.j) += w;
+            b[p.j] += w * d;
             c += w * d * d;
         }
+        return c;
     };
-    double c0 = sse;
-    with_prior(x, A, b, c0);
+    Normal raw = normal_equations(pts, use, side, x, weight);  // at x, without the priors
+    const auto n = static_cast<double>(std::max<std::size_t>(raw.n, 1));
+    sigma2 = std::max(raw.sse / n, 1e-6);
+    Mat7 A;
+    Vec7 b;
+    double c0 = with_prior(x, raw, A, b), lambda = 1e-3;
     for (int it = 0; it < iterations; ++it) {
         Mat7 M = A;
         M.diagonal() += lambda * (A.diagonal().array() + 1e-9).matrix();
@@ -226,19 +232,15 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
         xn[4] = std::clamp(xn[4], 0.0, 2.0 * prior.rho_max + 0.5);
         xn[5] = std::clamp(xn[5], 0.0, 2.0 * prior.rho_max + 0.5);
         if (far) xn[6] = std::max(xn[6], 0.05);
+        const Normal next = normal_equations(pts, use, side, xn, weight);
         Mat7 An;
         Vec7 bn;
-        double c1 = 0;
-        cost(xn, &An, &bn, &c1, &n);
-        const Mat7 An_raw = An;
-        const double c1_raw = c1;
-        with_prior(xn, An, bn, c1);
+        const double c1 = with_prior(xn, next, An, bn);
         if (c1 < c0) {
             // A nanometre, or a cost that no longer moves: converged (the results then agree
             // to 0.001 µm with a 100× tighter tolerance).
             const bool done = c0 - c1 < 1e-9 * c0 || step.norm() < 1e-6;
-            x = xn, A = An, b = bn, c0 = c1;
-            A_raw = An_raw, sse_raw = c1_raw;
+            x = xn, A = An, b = bn, c0 = c1, raw = next;
             lambda = std::max(lambda * 0.3, 1e-9);
             if (done) break;
         } else {
@@ -248,8 +250,8 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
     }
     // The normal matrix at the solution with the priors in it: where the samples do not fix the
     // draft (a wall out of view), its covariance is the prior's, and u says what that costs.
-    A = A_raw;
-    const double rms2 = sse_raw / static_cast<double>(std::max<std::size_t>(n, 1));
+    A = raw.A;
+    const double rms2 = raw.sse / n;
     for (const Prior1& p : priors)
         A(p.j, p.j) += p.hold_u * std::max(rms2, 1e-6) / (p.sigma * p.sigma);
     return {x, A, std::sqrt(rms2)};
