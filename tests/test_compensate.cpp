@@ -804,7 +804,7 @@ TEST_P(PartRunSteps, AnyGroupingOfTheFacesIsMeasurePart) {
     const auto& u = whole.displacement_mm;
     core::FaceDisplacementNoise noise;  // the compensation's own error, in every u
     for (const auto& face : s.recording.faces)
-        noise[face.name] = compensate::compensate_face(face, {}).noise;
+        noise[face.name] = compensate::compensation_error(face, {}).noise;
     ASSERT_TRUE(noise.begin()->second.known());
     const auto all = measure::measure_part(env().recipe, s.recording, T, u, {}, {}, noise);
     ASSERT_EQ(s.recording.faces.size(), 4u);
@@ -985,7 +985,7 @@ TEST(CompensationNoise, JitteredTimestampsAndAHoleDoNotHideTheNoise) {
         for (const double v : {a[j], 0.3 * a[j] - 2.9, 0.0})
             face.accel_mps2.push_back(static_cast<float>(v));
     }
-    const auto fc = compensate::compensate_face(face, {});
+    const auto fc = compensate::compensation_error(face, {});
     ASSERT_TRUE(fc.noise.known());
     EXPECT_NEAR(fc.accel_noise_ug[0], density_ug, 0.1 * density_ug);
     EXPECT_NEAR(fc.accel_noise_ug[1], 0.3 * density_ug, 0.1 * 0.3 * density_ug);

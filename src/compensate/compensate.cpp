@@ -345,23 +345,12 @@ std::vector<core::UntrustedProfiles> untrusted_runs(const core::FaceScan& face,
     return out;
 }
 
-// The compensation's own error (accel_noise_density, displacement_noise) from the samples as they
-// came, not the grid: interpolating between jittered timestamps damps the top band (a 1.6 %
-// jitter on the independent recordings). Segments stop at the gaps.
-void set_noise(const Samples& smp, const Eigen::Matrix3d& R_world_accel, double period,
-               const CompensationConfig& c, FaceCompensation& out) {
-    std::array<std::vector<double>, 3> raw;
-    std::vector<std::size_t> breaks;
-    for (std::size_t j = 0; j < smp.a.size(); ++j) {
-        const Eigen::Vector3d v = R_world_accel * smp.a[j];
-        for (int k = 0; k < 3; ++k) raw[k].push_back(v[k]);
-        if (j + 1 < smp.t.size() && smp.t[j + 1] - smp.t[j] > c.gap_factor * period)
-            breaks.push_back(j);
-    }
-    const auto density = accel_noise_density(raw, 1.0 / period, breaks);
-    if (!(density[0] > 0)) return;  // too little record: not known
-    for (int a = 0; a < 3; ++a) out.accel_noise_ug[a] = std::sqrt(density[a]) / kG * 1e6;
-    out.noise = displacement_noise(density, c);
+// Nominal period: the median interval (at least 2 samples).
+double median_period(const Samples& smp) {
+    std::vector<double> dt(smp.t.size() - 1);
+    for (std::size_t j = 0; j + 1 < smp.t.size(); ++j) dt[j] = smp.t[j + 1] - smp.t[j];
+    std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
+    return dt[dt.size() / 2];
 }
 
 }  // namespace
@@ -393,11 +382,7 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
                                               std::to_string(smp.t.size()) + ")");
         return out;
     }
-    // Nominal period: the median interval.
-    std::vector<double> dt(smp.t.size() - 1);
-    for (std::size_t j = 0; j + 1 < smp.t.size(); ++j) dt[j] = smp.t[j + 1] - smp.t[j];
-    std::nth_element(dt.begin(), dt.begin() + dt.size() / 2, dt.end());
-    const double period = dt[dt.size() / 2];
+    const double period = median_period(smp);
     if (!(period > 0)) {
         degrade_all("accelerometer timestamps not increasing");
         return out;
@@ -433,7 +418,6 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
         if (b.t1 > b.t0 && g1 >= g0) grid_gaps.push_back({g0, g1});
     }
     const auto u = integrate_across_gaps(grid, out.rate_hz, grid_gaps, c);
-    set_noise(smp, face.T_world_camera.linear() * face.R_camera_accel, period, c, out);
 
     const std::size_t n = u[0].size();
     double sum2 = 0.0;
@@ -467,6 +451,31 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
     out.rms_mm = n_applied ? std::sqrt(sum2 / static_cast<double>(n_applied)) : 0.0;
     out.degraded = out.n_degraded > 0;
     if (out.degraded && out.reasons.empty()) out.reasons.push_back("degraded profiles");
+    return out;
+}
+
+CompensationError compensation_error(const core::FaceScan& face, const CompensationConfig& c) {
+    CompensationError out;
+    if (face.n_profiles() == 0) return out;
+    const Samples smp = usable_samples(face, c);
+    if (smp.t.size() < 16) return out;
+    const double period = median_period(smp);
+    if (!(period > 0)) return out;
+    // The samples as they came, not the grid: interpolating between jittered timestamps damps
+    // the top band (a 1.6 % jitter on the independent recordings). Segments stop at the gaps.
+    const Eigen::Matrix3d R_world_accel = face.T_world_camera.linear() * face.R_camera_accel;
+    std::array<std::vector<double>, 3> raw;
+    std::vector<std::size_t> breaks;
+    for (std::size_t j = 0; j < smp.a.size(); ++j) {
+        const Eigen::Vector3d v = R_world_accel * smp.a[j];
+        for (int k = 0; k < 3; ++k) raw[k].push_back(v[k]);
+        if (j + 1 < smp.t.size() && smp.t[j + 1] - smp.t[j] > c.gap_factor * period)
+            breaks.push_back(j);
+    }
+    const auto density = accel_noise_density(raw, 1.0 / period, breaks);
+    if (!(density[0] > 0)) return out;  // too little record: not known
+    for (int a = 0; a < 3; ++a) out.accel_noise_ug[a] = std::sqrt(density[a]) / kG * 1e6;
+    out.noise = displacement_noise(density, c);
     return out;
 }
 

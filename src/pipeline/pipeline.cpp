@@ -142,11 +142,13 @@ void PartRun::Impl::compensate(const core::FaceScan& face) {
     auto fc = compensate::compensate_face(face, o.compensation);
     r.compensation.push_back({fc.face, fc.applied, fc.degraded, fc.reasons, fc.n_degraded,
                               fc.peak_mm, fc.rms_mm, fc.rate_hz, fc.untrusted});
-    if (fc.applied && fc.noise.known()) {
+    if (auto e = fc.applied ? compensate::compensation_error(face, o.compensation)
+                            : compensate::CompensationError{};
+        e.noise.known()) {
         auto& c = r.compensation.back();
-        c.accel_noise_ug = fc.accel_noise_ug;
-        for (int a = 0; a < 3; ++a) c.drift_sigma_mm[a] = std::sqrt(fc.noise.cov(a, 0.0));
-        noise.insert_or_assign(face.name, std::move(fc.noise));
+        c.accel_noise_ug = e.accel_noise_ug;
+        for (int a = 0; a < 3; ++a) c.drift_sigma_mm[a] = std::sqrt(e.noise.cov(a, 0.0));
+        noise.insert_or_assign(face.name, std::move(e.noise));
     }
     for (const auto& why : fc.reasons) r.warnings.push_back(face.name + ": compensation: " + why);
     if (fc.applied) u.insert_or_assign(face.name, std::move(fc.displacement_mm));

@@ -61,11 +61,9 @@ struct FaceCompensation {
     std::vector<Eigen::Vector3d> displacement_mm;  // per profile, world frame (0 where not applied)
     std::vector<std::uint8_t> profile_degraded;    // per profile: 1 = untrusted
     std::int64_t n_degraded = 0;
-    std::vector<core::UntrustedProfiles> untrusted;    // the same as runs, with their cause
-    double peak_mm = 0.0, rms_mm = 0.0;                // of |u| over the profiles
-    double rate_hz = 0.0;                              // resampling rate used
-    std::array<double, 3> accel_noise_ug = {0, 0, 0};  // density per world axis, µg/√Hz
-    core::DisplacementNoise noise;                     // the displacement's own error
+    std::vector<core::UntrustedProfiles> untrusted;  // the same as runs, with their cause
+    double peak_mm = 0.0, rms_mm = 0.0;              // of |u| over the profiles
+    double rate_hz = 0.0;                            // resampling rate used
 };
 
 // Per-profile world displacement of one face's sensor. Never throws: bad or missing samples make
@@ -74,5 +72,16 @@ struct FaceCompensation {
 // straight-line fill got wrong across each is estimated by least squares (docs/compensation.md
 // "Gaps").
 FaceCompensation compensate_face(const core::FaceScan& face, const CompensationConfig& config);
+
+// What compensate_face's displacement of `face` may be off by: the accelerometer's noise density
+// per world axis (accel_noise_density, off the samples as they came, segments stopping at gaps)
+// and the error it leaves (displacement_noise). Not known (noise.known() false, densities 0)
+// when the record is too short to tell. Apart from compensate_face: only the measurement wants
+// it, not the clock-offset search or the pose's look at a record still growing.
+struct CompensationError {
+    std::array<double, 3> accel_noise_ug = {0, 0, 0};  // µg/√Hz
+    core::DisplacementNoise noise;
+};
+CompensationError compensation_error(const core::FaceScan& face, const CompensationConfig& config);
 
 }  // namespace hotgauge::compensate
