@@ -42,6 +42,9 @@ struct CornerPoint {
     // The profile it was seen in (unique over the faces), or −1: samples of one profile share
     // its vibration residual, which u must count once per profile, not once per sample.
     std::int64_t profile = -1;
+    // The sample itself (unique over the faces), or −1: the fit's thinning keeps a sample by it,
+    // not by the sample's place in a window's list.
+    std::int64_t sample = -1;
 };
 
 // The corner's profile in the half-plane (s, h) about `centre`: s = side·(r − radius) is how far

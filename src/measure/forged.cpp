@@ -41,6 +41,8 @@ constexpr double kBeyondPlaneMm = 0.15;
 constexpr double kSharpRhoMm = 0.1, kSharpRhoNoise = 5.0;
 // CornerPoint::profile: face index × this + profile.
 constexpr std::int64_t kProfileKeyFace = 1'000'000;
+// CornerPoint::sample: face index × this + the sample's index in the face's grid.
+constexpr std::int64_t kSampleKeyFace = 1'000'000'000'000;
 // Fewer wall samples than this do not fix the wall's draft.
 constexpr std::int64_t kMinWallSamples = 150;
 // The profile's samples scatter by the range noise (0.05 mm); far more is not this corner.
@@ -112,7 +114,9 @@ std::vector<CornerPoint> corner_points(const std::vector<const FaceFrame*>& fram
                                                : Eigen::Vector2d::UnitX();
             const Eigen::Vector2d in_plane(ray.dot(ep.e1), ray.dot(ep.e2));
             const auto profile = static_cast<std::int64_t>(n.q / fr->w + face * kProfileKeyFace);
-            out.push_back({q, h, {in_plane.dot(radial), ray.dot(ep.plane.normal)}, profile});
+            const auto sample = static_cast<std::int64_t>(n.q + face * kSampleKeyFace);
+            out.push_back(
+                {q, h, {in_plane.dot(radial), ray.dot(ep.plane.normal)}, profile, sample});
         });
     }
     return out;
