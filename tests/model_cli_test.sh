@@ -19,7 +19,7 @@ grep -Eq '^model hub-a .*: [1-9][0-9]* samples, [1-9][0-9]* references, [1-9][0-
 
 "$bin" model info "$tmp/hub-a.hgm" > "$tmp/info.out" || fail "model info exited $?"
 cat "$tmp/info.out"
-for pattern in '^format version +1$' '^name +hub-a$' '^source +recipe .*hub-a.yaml$' \
+for pattern in '^format version +2$' '^name +hub-a$' '^source +recipe .*hub-a.yaml$' \
                '^axisymmetric +yes$' '^config +sampling_mm 5, ' '^samples +[1-9]' \
                '^references +[1-9]' '^table +[1-9][0-9]* keys, [1-9][0-9]* entries$'; do
   grep -Eq "$pattern" "$tmp/info.out" || fail "model info lacks /$pattern/"
@@ -80,10 +80,10 @@ cmp -s "$tmp/hub-a.hgm" "$tmp/corrupt.hgm" && printf '\xaa' | dd of="$tmp/corrup
 expect_error "$tmp/corrupt.hgm: corrupt: checksum mismatch" info "$tmp/corrupt.hgm"
 head -c $((size - 100)) "$tmp/hub-a.hgm" > "$tmp/short.hgm"
 expect_error "$tmp/short.hgm: truncated" info "$tmp/short.hgm"
-cp "$tmp/hub-a.hgm" "$tmp/v2.hgm"
-printf '\x02' | dd of="$tmp/v2.hgm" bs=1 seek=8 conv=notrunc status=none
-expect_error "$tmp/v2.hgm: model format version 2, this build reads 1: rebuild with \`hotgauge model build\`" \
-  info "$tmp/v2.hgm"
+cp "$tmp/hub-a.hgm" "$tmp/v1.hgm"
+printf '\x01' | dd of="$tmp/v1.hgm" bs=1 seek=8 conv=notrunc status=none
+expect_error "$tmp/v1.hgm: model format version 1, this build reads 2: rebuild with \`hotgauge model build\`" \
+  info "$tmp/v1.hgm"
 echo "not a model" > "$tmp/text.hgm"
 expect_error "$tmp/text.hgm: not a hotgauge model file" info "$tmp/text.hgm"
 expect_error "$tmp/none.hgm: no such file" info "$tmp/none.hgm"

@@ -153,10 +153,11 @@ void expect_same_model(const Model& a, const Model& b) {
     EXPECT_EQ(a.refs, b.refs);
     ASSERT_EQ(a.profile.size(), b.profile.size());
     for (std::size_t i = 0; i < a.profile.size(); ++i) {
-        EXPECT_EQ(a.profile[i].cylinder, b.profile[i].cylinder);
-        EXPECT_TRUE(same_bits(a.profile[i].value, b.profile[i].value));
-        EXPECT_TRUE(same_bits(a.profile[i].lo, b.profile[i].lo));
-        EXPECT_TRUE(same_bits(a.profile[i].hi, b.profile[i].hi));
+        EXPECT_EQ(a.profile[i].wall, b.profile[i].wall);
+        EXPECT_TRUE(same_bits(a.profile[i].r0, b.profile[i].r0));
+        EXPECT_TRUE(same_bits(a.profile[i].z0, b.profile[i].z0));
+        EXPECT_TRUE(same_bits(a.profile[i].r1, b.profile[i].r1));
+        EXPECT_TRUE(same_bits(a.profile[i].z1, b.profile[i].z1));
     }
     expect_same_vectors(a.dense_points, b.dense_points, "dense_points");
     expect_same_vectors(a.dense_normals, b.dense_normals, "dense_normals");
@@ -319,7 +320,7 @@ TEST_F(ModelFile, RecipeModelRoundTripIsBitExact) {
     const Bytes first = read_all(p);
     ASSERT_TRUE(write_model(*back, p));
     EXPECT_EQ(read_all(p), first);
-    const Bytes magic = {'H', 'G', 'P', 'P', 'F', 0, '\r', '\n', 1, 0, 0, 0};
+    const Bytes magic = {'H', 'G', 'P', 'P', 'F', 0, '\r', '\n', 2, 0, 0, 0};
     EXPECT_TRUE(std::equal(magic.begin(), magic.end(), first.begin()));
 }
 
@@ -373,9 +374,9 @@ TEST_F(ModelFile, EveryBadFileIsAClearError) {
     EXPECT_TRUE(has(error_for(b), "corrupt: checksum mismatch"));
 
     b = bytes;
-    b[8] = 2;
+    b[8] = 1;
     const std::string version = error_for(b);
-    EXPECT_TRUE(has(version, "model format version 2, this build reads 1")) << version;
+    EXPECT_TRUE(has(version, "model format version 1, this build reads 2")) << version;
     EXPECT_TRUE(has(version, "hotgauge model build")) << version;
 
     // Text-mode transfer: "\r\n" in the magic became "\n".
@@ -443,10 +444,10 @@ TEST_F(ModelFile, NonFiniteNumbersBehindAGoodChecksumAreRefused) {
                   .find("invalid model: model: a sample point is not finite"),
               std::string::npos);
     ASSERT_FALSE(m.profile.empty());
-    const auto& segment = m.profile.front();  // value, lo, hi: three doubles in the file
-    const std::array<double, 3> stored = {segment.value, segment.lo, segment.hi};
-    const std::array<double, 3> infinite = {std::numeric_limits<double>::infinity(), segment.lo,
-                                            segment.hi};
+    const auto& segment = m.profile.front();  // r0, z0, r1, z1: four doubles in the file
+    const std::array<double, 4> stored = {segment.r0, segment.z0, segment.r1, segment.z1};
+    const std::array<double, 4> infinite = {segment.r0, std::numeric_limits<double>::infinity(),
+                                            segment.r1, segment.z1};
     const std::string e = replaced(stored.data(), infinite.data(), sizeof stored);
     EXPECT_NE(e.find("a profile segment is not finite"), std::string::npos) << e;
 }

@@ -170,10 +170,11 @@ std::vector<unsigned char> serialize(const Model& m) {
     w.u32s(m.refs);
     w.u64(m.profile.size());
     for (const auto& s : m.profile) {
-        w.u8(s.cylinder ? 1 : 0);
-        w.f64(s.value);
-        w.f64(s.lo);
-        w.f64(s.hi);
+        w.u8(s.wall ? 1 : 0);
+        w.f64(s.r0);
+        w.f64(s.z0);
+        w.f64(s.r1);
+        w.f64(s.z1);
     }
     w.vec3s(m.dense_points);
     w.vec3s(m.dense_normals);
@@ -204,12 +205,13 @@ Model deserialize(Reader& r) {
     m.points = r.vec3s("points");
     m.normals = r.vec3s("normals");
     m.refs = r.u32s("refs");
-    m.profile.resize(r.count("profile", 25));
+    m.profile.resize(r.count("profile", 33));
     for (auto& s : m.profile) {
-        s.cylinder = r.flag("profile");
-        s.value = r.f64("profile");
-        s.lo = r.f64("profile");
-        s.hi = r.f64("profile");
+        s.wall = r.flag("profile");
+        s.r0 = r.f64("profile");
+        s.z0 = r.f64("profile");
+        s.r1 = r.f64("profile");
+        s.z1 = r.f64("profile");
     }
     m.dense_points = r.vec3s("dense_points");
     m.dense_normals = r.vec3s("dense_normals");

@@ -25,10 +25,9 @@ Surface::Surface(const Model& model) : model_(model) {
     hi_ = -lo_;
     if (model.axisymmetric) {
         for (const auto& s : model.profile) {
-            const auto r = static_cast<float>(s.cylinder ? s.value : s.hi);
-            hi_.x() = std::max(hi_.x(), r);
-            lo_.z() = std::min(lo_.z(), static_cast<float>(s.cylinder ? s.lo : s.value));
-            hi_.z() = std::max(hi_.z(), static_cast<float>(s.cylinder ? s.hi : s.value));
+            hi_.x() = std::max({hi_.x(), static_cast<float>(s.r0), static_cast<float>(s.r1)});
+            lo_.z() = std::min({lo_.z(), static_cast<float>(s.z0), static_cast<float>(s.z1)});
+            hi_.z() = std::max({hi_.z(), static_cast<float>(s.z0), static_cast<float>(s.z1)});
         }
         hi_.y() = hi_.x();
         lo_.x() = lo_.y() = -hi_.x();
@@ -59,21 +58,20 @@ Surface::Surface(const Model& model) : model_(model) {
     half_size_ = 0.5f * (hi_ - lo_).norm();
 }
 
-namespace {
-
-// Distance from (r, z) to a segment, and the segment's farthest point from a cell's corners.
-float seg_distance(float r, float z, bool cylinder, float value, float lo, float hi) {
-    const float along = cylinder ? z : r, across = cylinder ? r : z;
-    const float d_along = along < lo ? lo - along : (along > hi ? along - hi : 0.0f);
-    return std::sqrt(d_along * d_along + (across - value) * (across - value));
+float Surface::Seg::distance(float r, float z, float& t) const {
+    t = std::clamp((r - r0) * ur + (z - z0) * uz, 0.0f, len);
+    const float dr = r0 + t * ur - r, dz = z0 + t * uz - z;
+    return std::sqrt(dr * dr + dz * dz);
 }
 
-}  // namespace
-
 void Surface::build_profile_grid() {
-    for (const auto& s : model_.profile)
-        segs_.push_back({s.cylinder, static_cast<float>(s.value), static_cast<float>(s.lo),
-                         static_cast<float>(s.hi)});
+    for (const auto& s : model_.profile) {
+        const double dr = s.r1 - s.r0, dz = s.z1 - s.z0, len = std::hypot(dr, dz);
+        segs_.push_back({static_cast<float>(s.r0), static_cast<float>(s.z0),
+                         static_cast<float>(dr / len), static_cast<float>(dz / len),
+                         static_cast<float>(len), static_cast<float>(dz / len),
+                         static_cast<float>(-dr / len)});
+    }
     constexpr float kMargin = 30.0f;
     r0_ = 0.0f;
     z0_ = lo_.z() - kMargin;
@@ -89,8 +87,8 @@ void Surface::build_profile_grid() {
             const float half_diag = 0.5f * std::sqrt(2.0f) * cell_mm_;
             float bound = std::numeric_limits<float>::max();
             for (std::size_t k = 0; k < segs_.size(); ++k) {
-                const Seg& g = segs_[k];
-                const float dc = seg_distance(rc, zc, g.cylinder, g.value, g.lo, g.hi);
+                float t;
+                const float dc = segs_[k].distance(rc, zc, t);
                 dmin[k] = std::max(0.0f, dc - half_diag);
                 bound = std::min(bound, dc + half_diag);
             }
@@ -138,9 +136,7 @@ Closest Surface::closest(const Eigen::Vector3f& q, float scale) const {
 Closest Surface::closest_profile(const Eigen::Vector3f& q, float scale) const {
     const float r = std::sqrt(q.x() * q.x() + q.y() * q.y());
     const float rs = r / scale, zs = q.z() / scale;
-    float best = std::numeric_limits<float>::max();
-    float cr = 0, cz = 0;
-    bool cyl = false, corner = false;
+    float best = std::numeric_limits<float>::max(), t_best = 0;
     int seg = -1;
     const int a = static_cast<int>((rs - r0_) / cell_mm_),
               b = static_cast<int>((zs - z0_) / cell_mm_);
@@ -150,61 +146,171 @@ Closest Surface::closest_profile(const Eigen::Vector3f& q, float scale) const {
     const std::size_t k1 = in_grid ? cell_begin_[c + 1] : segs_.size();
     for (std::size_t k = k0; k < k1; ++k) {
         const std::size_t si = in_grid ? cell_segs_[k] : k;
-        const Seg& s = segs_[si];
-        const float lo = s.lo, hi = s.hi, v = s.value;
-        float pr, pz;
-        if (s.cylinder) {
-            pr = v;
-            pz = std::clamp(zs, lo, hi);
-        } else {
-            pr = std::clamp(rs, lo, hi);
-            pz = v;
-        }
-        const float d2 = (pr - rs) * (pr - rs) + (pz - zs) * (pz - zs);
-        if (d2 < best) {
-            best = d2;
-            cr = pr;
-            cz = pz;
-            cyl = s.cylinder;
-            corner = (s.cylinder ? pz : pr) == lo || (s.cylinder ? pz : pr) == hi;
+        float t;
+        const float d = segs_[si].distance(rs, zs, t);
+        if (d < best) {
+            best = d;
+            t_best = t;
             seg = static_cast<int>(si);
         }
     }
+    const Seg& g = segs_[static_cast<std::size_t>(seg)];
+    const float cr = g.r0 + t_best * g.ur, cz = g.z0 + t_best * g.uz;
+    const bool corner = t_best <= 0.0f || t_best >= g.len;
     const float cx = r > 1e-6f ? q.x() / r : 1.0f, cy = r > 1e-6f ? q.y() / r : 0.0f;
     const Eigen::Vector3f p(scale * cr * cx, scale * cr * cy, scale * cz);
     // Beyond an edge the closest point is the edge itself and the distance grows in every
     // direction away from it: the residual direction is then q − p (the gradient of the
     // distance), so that points past an edge pull the part back instead of sliding along a plane.
-    Eigen::Vector3f n = cyl ? Eigen::Vector3f(cx, cy, 0.0f) : Eigen::Vector3f::UnitZ();
+    Eigen::Vector3f n(g.nr * cx, g.nr * cy, g.nz);
     if (corner) {
         const float dr = rs - cr, dz = zs - cz;
         const float len = std::sqrt(dr * dr + dz * dz);
         if (len > 1e-4f) n = Eigen::Vector3f(dr / len * cx, dr / len * cy, dz / len);
     }
-    return {p, n, (q - p).norm(), corner ? -1 : seg};
+    return {p, n, (q - p).norm(), seg, scale * (t_best - 0.5f * g.len), {cx, cy}};
 }
+
+namespace {
+
+// The walls' nuisance unknowns when ICP frees them (IcpOptions::free_radii): each wall's offset δ
+// along its normal and tilt β about its middle, in columns `first + 2j` and `first + 2j + 1`. A
+// wall's own segment moves with both; the short segments joined to it end to end (a fillet's
+// chords, up to the next long segment) with its offset.
+class Walls {
+  public:
+    Walls(const Model& model, bool free, int first) : first_(first) {
+        const auto& p = model.profile;
+        wall_.assign(p.size(), -1);
+        normal_.assign(p.size(), Eigen::Vector2f::Zero());
+        own_.assign(p.size(), 0);
+        if (!free) return;
+        constexpr double kChordMm = 1.0;
+        auto length = [&](std::size_t k) {
+            return std::hypot(p[k].r1 - p[k].r0, p[k].z1 - p[k].z0);
+        };
+        auto chord_of = [&](std::size_t a, std::size_t b) {  // b is a short piece joined to a
+            const bool joined = a < b ? p[a].r1 == p[b].r0 && p[a].z1 == p[b].z0
+                                      : p[b].r1 == p[a].r0 && p[b].z1 == p[a].z0;
+            return joined && !p[b].wall && length(b) < kChordMm && wall_[b] < 0;
+        };
+        for (std::size_t k = 0; k < p.size(); ++k) {
+            if (!p[k].wall) continue;
+            const double len = length(k);
+            const Eigen::Vector2f n(static_cast<float>((p[k].z1 - p[k].z0) / len),
+                                    static_cast<float>((p[k].r0 - p[k].r1) / len));
+            auto claim = [&](std::size_t q) {
+                wall_[q] = n_;
+                normal_[q] = n;
+            };
+            claim(k);
+            own_[k] = 1;
+            for (std::size_t q = k; q > 0 && chord_of(q, q - 1); --q) claim(q - 1);
+            for (std::size_t q = k; q + 1 < p.size() && chord_of(q, q + 1); ++q) claim(q + 1);
+            ++n_;
+        }
+        delta_.assign(static_cast<std::size_t>(n_), 0.0);
+        beta_.assign(static_cast<std::size_t>(n_), 0.0);
+    }
+    int unknowns() const { return 2 * n_; }
+
+    // The correspondence's wall (−1: none), ∂e/∂δ (the share of the wall's normal motion along
+    // its residual's direction) and ∂e/∂β (the tilt's lever).
+    struct Term {
+        int j = -1;
+        float d_delta = 0, d_beta = 0;
+    };
+    Term term(const Closest& c) const {
+        Term t;
+        if (c.segment < 0) return t;
+        const auto k = static_cast<std::size_t>(c.segment);
+        t.j = wall_[k];
+        if (t.j < 0) return t;
+        const Eigen::Vector2f& nw = normal_[k];
+        const Eigen::Vector3f n3(nw.x() * c.radial.x(), nw.x() * c.radial.y(), nw.y());
+        t.d_delta = -c.normal.dot(n3);
+        t.d_beta = own_[k] ? t.d_delta * c.along : 0.0f;
+        return t;
+    }
+    // Point-to-plane residual of q against c, with the walls where they are now.
+    float residual(const Closest& c, const Eigen::Vector3f& q) const {
+        const float e = c.normal.dot(q - c.point);
+        const Term t = term(c);
+        if (t.j < 0) return e;
+        const auto w = static_cast<std::size_t>(t.j);
+        return e + static_cast<float>(t.d_delta * delta_[w] + t.d_beta * beta_[w]);
+    }
+    // One correspondence's share of the normal equations: its wall's columns, and their coupling
+    // to the pose's (J, the pose's first `n_pose` derivatives).
+    template <class Jac>
+    void add(const Closest& c, const Jac& J, int n_pose, double w, double e, Eigen::MatrixXd& H,
+             Eigen::VectorXd& g) const {
+        const Term t = term(c);
+        if (t.j < 0) return;
+        const int col = first_ + 2 * t.j;
+        const double jd = t.d_delta, jb = t.d_beta;
+        for (int a = 0; a < n_pose; ++a) {
+            H(a, col) += w * J(a) * jd;
+            H(a, col + 1) += w * J(a) * jb;
+        }
+        H(col, col) += w * jd * jd;
+        H(col, col + 1) += w * jd * jb;
+        H(col + 1, col + 1) += w * jb * jb;
+        g(col) += w * e * jd;
+        g(col + 1) += w * e * jb;
+    }
+    // Weak priors: a wall that no point sees keeps its offset and tilt at zero.
+    void add_priors(Eigen::MatrixXd& H) const {
+        constexpr double kTiltPriorMm2 = 100.0;  // as weak as one point 10 mm along
+        for (int j = 0; j < n_; ++j) {
+            H(first_ + 2 * j, first_ + 2 * j) += 1.0;
+            H(first_ + 2 * j + 1, first_ + 2 * j + 1) += kTiltPriorMm2;
+        }
+    }
+    void update(const Eigen::VectorXd& x) {
+        for (int j = 0; j < n_; ++j) {
+            delta_[static_cast<std::size_t>(j)] += x(first_ + 2 * j);
+            beta_[static_cast<std::size_t>(j)] += x(first_ + 2 * j + 1);
+        }
+    }
+
+  private:
+    int first_, n_ = 0;
+    std::vector<int> wall_;                // per segment: its wall's index, or −1
+    std::vector<Eigen::Vector2f> normal_;  // per segment: that wall's outward (r, z) normal
+    std::vector<char> own_;                // per segment: it is the wall itself
+    std::vector<double> delta_, beta_;
+};
+
+// The pose step x (ω over the first n_rot entries, then v, then the log scale when estimated)
+// applied to the part frame (q' = D·q: T_part_world ← D·T_part_world); returns how far it moves
+// the part's farthest point.
+double apply_step(const Eigen::VectorXd& x, int n_rot, bool estimate_scale, double half_size,
+                  Eigen::Isometry3d& T_world_part, double& scale) {
+    Eigen::Vector3d w = Eigen::Vector3d::Zero();
+    for (int a = 0; a < n_rot; ++a) w(a) = x(a);
+    const Eigen::Vector3d v = x.segment<3>(n_rot);
+    Eigen::Isometry3d D = Eigen::Isometry3d::Identity();
+    if (w.norm() > 0) D.linear() = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
+    D.translation() = v;
+    T_world_part = (D * T_world_part.inverse()).inverse();
+    const double log_scale = estimate_scale ? x(n_rot + 3) : 0.0;
+    scale *= std::exp(log_scale);
+    return w.norm() * half_size + v.norm() + std::abs(log_scale) * half_size;
+}
+
+}  // namespace
 
 IcpResult icp(const Surface& surface, const Model& model, const std::vector<Eigen::Vector3f>& pts,
               Eigen::Isometry3d T_world_part, double scale, const IcpOptions& o) {
     IcpResult res;
     // Unknowns: rotation ω and translation v of the part frame (scene side), log scale, and the
-    // cylinders' radius offsets. Axisymmetric: the spin ω_z is unobservable and left out.
+    // walls' offsets and tilts (Walls). Axisymmetric: the spin ω_z is unobservable and left out.
     const bool axi = model.axisymmetric;
     const int n_rot = axi ? 2 : 3;
     const int n_pose = n_rot + 3 + (o.estimate_scale ? 1 : 0);
-    // Offset unknown of each profile segment (−1: none).
-    std::vector<int> offset_of(model.profile.size(), -1);
-    int n_off = 0;
-    if (axi && o.free_radii)
-        for (std::size_t k = 0; k < model.profile.size(); ++k)
-            if (model.profile[k].cylinder) offset_of[k] = n_off++;
-    const int n_par = n_pose + n_off;
-    std::vector<double> delta(static_cast<std::size_t>(n_off), 0.0);
-    auto offset = [&](const Closest& c) {
-        const int j = c.segment >= 0 ? offset_of[static_cast<std::size_t>(c.segment)] : -1;
-        return j;
-    };
-    const double half_size = surface.half_size();
+    Walls walls(model, axi && o.free_radii, n_pose);
+    const int n_par = n_pose + walls.unknowns();
     std::vector<float> resid;
     std::vector<Closest> cs(pts.size());
     std::vector<Eigen::Vector3f> qs(pts.size());
@@ -214,23 +320,18 @@ IcpResult icp(const Surface& surface, const Model& model, const std::vector<Eige
         for (int k = 0; k < o.iterations_per_stage && it < o.max_iterations; ++k, ++it) {
             const Eigen::Isometry3f T_pw = T_world_part.inverse().cast<float>();
             const auto s = static_cast<float>(scale);
-            auto residual = [&](std::size_t i) {
-                const int j = offset(cs[i]);
-                return cs[i].normal.dot(qs[i] - cs[i].point) -
-                       (j >= 0 ? static_cast<float>(delta[static_cast<std::size_t>(j)]) : 0.0f);
-            };
             // Residual scale for the robust kernel: MAD of the gated residuals.
             resid.clear();
             for (std::size_t i = 0; i < pts.size(); ++i) {
                 qs[i] = T_pw * pts[i];
                 cs[i] = surface.closest(qs[i], s);
-                if (cs[i].distance < gate) resid.push_back(std::abs(residual(i)));
+                if (cs[i].distance < gate) resid.push_back(std::abs(walls.residual(cs[i], qs[i])));
             }
             if (resid.size() < 12) break;
             std::nth_element(resid.begin(), resid.begin() + resid.size() / 2, resid.end());
             const float sigma = std::max(0.01f, 1.4826f * resid[resid.size() / 2]);
             const float c = 4.685f * sigma;  // Tukey biweight
-            // Normal equations; each point touches the pose block and at most one offset.
+            // Normal equations; each point touches the pose block and at most one wall.
             Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n_par, n_par);
             Eigen::VectorXd g = Eigen::VectorXd::Zero(n_par);
             Eigen::Matrix<double, 6, 1> J = Eigen::Matrix<double, 6, 1>::Zero();
@@ -239,7 +340,7 @@ IcpResult icp(const Surface& surface, const Model& model, const std::vector<Eige
             for (std::size_t i = 0; i < pts.size(); ++i) {
                 if (cs[i].distance >= gate) continue;
                 const Eigen::Vector3f& n = cs[i].normal;
-                const float e = residual(i);
+                const float e = walls.residual(cs[i], qs[i]);
                 if (std::abs(e) >= c) continue;
                 const float u = e / c;
                 const double w = (1.0f - u * u) * (1.0f - u * u);
@@ -252,12 +353,7 @@ IcpResult icp(const Surface& surface, const Model& model, const std::vector<Eige
                     for (int b = a; b < n_pose; ++b) H(a, b) += wja * J(b);
                     g(a) += wja * e;
                 }
-                if (const int j = offset(cs[i]); j >= 0) {  // ∂e/∂δ = −1
-                    const int col = n_pose + j;
-                    for (int a = 0; a < n_pose; ++a) H(a, col) -= w * J(a);
-                    H(col, col) += w;
-                    g(col) -= w * e;
-                }
+                walls.add(cs[i], J, n_pose, w, e, H, g);
                 sw += w;
                 swe2 += w * e * e;
                 ++used;
@@ -265,28 +361,17 @@ IcpResult icp(const Surface& surface, const Model& model, const std::vector<Eige
             res.used = used;
             res.rms_mm = sw > 0 ? std::sqrt(swe2 / sw) : 0;
             if (used < n_pose * 4) break;
-            // A weak prior keeps the offset of a cylinder that no point sees at zero; a tiny
-            // damping keeps a direction the data do not fix (the spin of a symmetric part under a
-            // general model) from drifting.
-            for (int j = 0; j < n_off; ++j) H(n_pose + j, n_pose + j) += 1.0;
+            // A tiny damping keeps a direction the data do not fix (the spin of a symmetric part
+            // under a general model) from drifting.
+            walls.add_priors(H);
             const double damping = 1e-9 * H.diagonal().maxCoeff();
             for (int a = 0; a < n_par; ++a) H(a, a) += damping;
             const Eigen::MatrixXd Hs = H.selfadjointView<Eigen::Upper>();
             const Eigen::VectorXd x = Hs.ldlt().solve(-g);
             if (!x.allFinite()) break;
-            Eigen::Vector3d w = Eigen::Vector3d::Zero();
-            for (int a = 0; a < n_rot; ++a) w(a) = x(a);
-            const Eigen::Vector3d v = x.segment<3>(n_rot);
-            Eigen::Isometry3d D = Eigen::Isometry3d::Identity();
-            if (w.norm() > 0)
-                D.linear() = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
-            D.translation() = v;
-            // q' = D·q: the part frame is updated as T_part_world ← D·T_part_world.
-            T_world_part = (D * T_world_part.inverse()).inverse();
-            if (o.estimate_scale) scale *= std::exp(x(n_pose - 1));
-            for (int j = 0; j < n_off; ++j) delta[static_cast<std::size_t>(j)] += x(n_pose + j);
-            const double motion = w.norm() * half_size + v.norm() +
-                                  (o.estimate_scale ? std::abs(x(n_pose - 1)) * half_size : 0.0);
+            const double motion =
+                apply_step(x, n_rot, o.estimate_scale, surface.half_size(), T_world_part, scale);
+            walls.update(x);
             if (motion < o.stop_mm && k > 0) break;
         }
     }

@@ -39,7 +39,9 @@ std::optional<Plane> background_plane(const Samples& s, double band_mm, double m
 struct Closest {
     Eigen::Vector3f point, normal;
     float distance;    // |q − point|
-    int segment = -1;  // profile segment of an axisymmetric model (−1: an edge, or no profile)
+    int segment = -1;  // profile segment of an axisymmetric model (−1: no profile)
+    float along = 0;   // where on that segment, mm from its middle
+    Eigen::Vector2f radial = Eigen::Vector2f::UnitX();  // (x, y) direction of q from the axis
 };
 
 // Point-to-plane ICP of scene points (world) against the model surface.
@@ -49,8 +51,9 @@ struct IcpOptions {
     int max_iterations = 30;
     double stop_mm = 1e-4;
     bool estimate_scale = false;
-    // Axisymmetric models: each cylinder's radius gets a free offset (a nuisance unknown), so
-    // that as-forged diameters off nominal do not pull the axis where a wall is seen on one side.
+    // Axisymmetric models: each wall gets a free offset and a free tilt of its profile line
+    // (nuisance unknowns), so that as-forged diameters and drafts off the model's do not pull
+    // the axis where a wall is seen on one side.
     bool free_radii = false;
 };
 struct IcpResult {
@@ -82,8 +85,10 @@ class Surface {
     // can hold the closest point of a query in it (the rest are farther than some segment's
     // farthest point of the cell).
     struct Seg {
-        bool cylinder;
-        float value, lo, hi;
+        float r0, z0, ur, uz, len;  // start, unit direction, length
+        float nr, nz;               // outward unit normal (the material is on the left)
+        // Distance from (r, z) to the segment; t: where its closest point is, in [0, len].
+        float distance(float r, float z, float& t) const;
     };
     std::vector<Seg> segs_;
     float cell_mm_ = 1, r0_ = 0, z0_ = 0;

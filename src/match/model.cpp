@@ -6,6 +6,8 @@
 #include <numbers>
 #include <unordered_map>
 
+#include "hotgauge/core/forged.hpp"
+
 namespace hotgauge::match {
 namespace {
 
@@ -44,6 +46,92 @@ void finish(Model& m) {
     m.step_mm = m.config.distance_step_mm > 0 ? m.config.distance_step_mm : m.config.sampling_mm;
     m.diameter_mm = bbox_extent(m.points).norm();
     build_table(m);
+}
+
+// The sharp, vertical boundary of the recipe's sections, collinear neighbours joined (fewer
+// segments for ICP's closest point), each turned so that the material is on its left.
+core::Result<std::vector<ProfileSegment>> sharp_profile(const core::Recipe& recipe) {
+    const auto solid = core::AxisymmetricSolid::from_recipe(recipe);
+    std::vector<core::AxisymmetricSolid::Segment> joined;
+    for (const auto& seg : solid.boundary()) {
+        auto joins = [&](core::AxisymmetricSolid::Segment& p) {
+            return p.cylinder == seg.cylinder && p.value == seg.value &&
+                   (p.hi == seg.lo || seg.hi == p.lo);
+        };
+        auto it = std::find_if(joined.begin(), joined.end(), joins);
+        if (it == joined.end()) {
+            joined.push_back(seg);
+        } else {
+            it->lo = std::min(it->lo, seg.lo);
+            it->hi = std::max(it->hi, seg.hi);
+        }
+    }
+    constexpr double kProbe = 1e-3;
+    std::vector<ProfileSegment> out;
+    for (const auto& g : joined) {
+        ProfileSegment p = g.cylinder ? ProfileSegment{g.value, g.lo, g.value, g.hi, true}
+                                      : ProfileSegment{g.lo, g.value, g.hi, g.value, false};
+        // The left of a cylinder going up is −r; of a plane going out, +z.
+        const bool left_is_material = g.cylinder
+                                          ? solid.inside(g.value - kProbe, 0.5 * (g.lo + g.hi))
+                                          : solid.inside(0.5 * (g.lo + g.hi), g.value + kProbe);
+        if (!left_is_material) {
+            std::swap(p.r0, p.r1);
+            std::swap(p.z0, p.z1);
+        }
+        out.push_back(p);
+    }
+    return out;
+}
+
+// A polyline with points dropped while each dropped point stays within `tol_mm` of the chord
+// that replaces it: a fillet's chords are made for the simulator's sub-micrometre sag, far finer
+// than matching needs.
+std::vector<Eigen::Vector2d> simplify(const std::vector<Eigen::Vector2d>& p, double tol_mm) {
+    if (p.size() < 3) return p;
+    auto off_chord = [&](std::size_t a, std::size_t b, std::size_t k) {
+        const Eigen::Vector2d d = p[b] - p[a];
+        const double t = std::clamp((p[k] - p[a]).dot(d) / d.squaredNorm(), 0.0, 1.0);
+        return (p[a] + t * d - p[k]).norm();
+    };
+    std::vector<Eigen::Vector2d> out{p.front()};
+    std::size_t a = 0;
+    for (std::size_t b = 2; b < p.size(); ++b)
+        for (std::size_t k = a + 1; k < b; ++k)
+            if (off_chord(a, b, k) > tol_mm) {
+                a = b - 1;
+                out.push_back(p[a]);
+                break;
+            }
+    out.push_back(p.back());
+    return out;
+}
+
+// The part as its forging drawing draws it, at half the drawing's limits (model.hpp): both
+// halves' profiles about one axis, without the parting plane between them. A segment is a wall
+// when it is steeper than 45° and longer than any fillet chord left by simplify().
+core::Result<std::vector<ProfileSegment>> drawn_profile(const core::Recipe& recipe) {
+    core::ForgedShape shape;
+    for (const auto& w : core::forged_walls(recipe))
+        shape.draft_deg[w.name] = 0.5 * recipe.draft_of(w.section);
+    for (const auto& c : core::forged_corners(recipe))
+        shape.fillet_mm[c.name] = 0.5 * recipe.fillet_at(c.level);
+    auto part = core::build_forged(recipe, shape);
+    if (!part)
+        return core::make_error(recipe.source +
+                                ": the drawn part for matching: " + part.error().message);
+    constexpr double kChordTolMm = 0.005, kWallMinMm = 1.0;
+    std::vector<ProfileSegment> out;
+    for (const auto* half : {&part->lower, &part->upper}) {
+        const auto p = simplify(*half, kChordTolMm);
+        for (std::size_t i = 0; i + 1 < p.size(); ++i) {
+            const Eigen::Vector2d a = p[i], b = p[i + 1], d = b - a;
+            if (d.norm() <= 0.0 || (a.x() <= 0.0 && b.x() <= 0.0)) continue;  // on the axis
+            const bool wall = std::abs(d.y()) > std::abs(d.x()) && d.norm() > kWallMinMm;
+            out.push_back({a.x(), a.y(), b.x(), b.y(), wall});
+        }
+    }
+    return out;
 }
 
 }  // namespace
@@ -150,44 +238,32 @@ core::Result<Model> model_from_recipe(const core::Recipe& recipe, const ModelCon
     if (auto ok = check_config(config); !ok) return ok.error();
     if (recipe.outer.empty())
         return core::make_error(recipe.source + ": no outer sections: no geometry to match");
-    const auto solid = core::AxisymmetricSolid::from_recipe(recipe);
+    auto profile = recipe.forging ? drawn_profile(recipe) : sharp_profile(recipe);
+    if (!profile) return profile.error();
     Model m;
     m.name = recipe.name;
     m.source = "recipe " + recipe.source;
     m.config = config;
     m.axisymmetric = true;
-    // The boundary, with collinear neighbours joined (fewer segments for ICP's closest point).
-    for (const auto& seg : solid.boundary()) {
-        auto joins = [&](core::AxisymmetricSolid::Segment& p) {
-            return p.cylinder == seg.cylinder && p.value == seg.value &&
-                   (p.hi == seg.lo || seg.hi == p.lo);
-        };
-        auto it = std::find_if(m.profile.begin(), m.profile.end(), joins);
-        if (it == m.profile.end()) {
-            m.profile.push_back(seg);
-        } else {
-            it->lo = std::min(it->lo, seg.lo);
-            it->hi = std::max(it->hi, seg.hi);
-        }
-    }
-    const double s = config.sampling_mm;
-    constexpr double kProbe = 1e-3;
+    m.profile = std::move(*profile);
     // Meridian samples (r, z) with their outward normals, then revolved: the sample at azimuth 0
-    // of each meridian sample is a reference point.
+    // of each meridian sample is a reference point. A fillet's chords (under a millimetre) share
+    // their samples: one where their run has gathered a sampling distance, not one each.
+    const double s = config.sampling_mm;
+    constexpr double kChordMm = 1.0;
+    double run = 0;
     for (const auto& seg : m.profile) {
-        const int n = std::max(1, static_cast<int>(std::lround((seg.hi - seg.lo) / s)));
+        const double dr = seg.r1 - seg.r0, dz = seg.z1 - seg.z0, len = std::hypot(dr, dz);
+        const double nr = dz / len, nz = -dr / len;
+        int n = std::max(1, static_cast<int>(std::lround(len / s)));
+        if (len < kChordMm) {
+            run += len;
+            n = run >= s ? 1 : 0;
+            if (n) run = 0;
+        }
         for (int q = 0; q < n; ++q) {
-            const double along = seg.lo + (q + 0.5) * (seg.hi - seg.lo) / n;
-            double r, z, nr = 0, nz = 0;
-            if (seg.cylinder) {
-                r = seg.value;
-                z = along;
-                nr = solid.inside(r - kProbe, z) ? 1.0 : -1.0;
-            } else {
-                r = along;
-                z = seg.value;
-                nz = solid.inside(r, z - kProbe) ? 1.0 : -1.0;
-            }
+            const double t = (q + 0.5) / n;
+            const double r = seg.r0 + t * dr, z = seg.z0 + t * dz;
             const int m_az =
                 std::max(1, static_cast<int>(std::lround(2 * std::numbers::pi * r / s)));
             for (int a = 0; a < m_az; ++a) {
@@ -288,8 +364,9 @@ core::Result<void> Model::validate() const {
         if (!n.allFinite() || std::abs(n.norm() - 1.0f) > 1e-3f)
             return bad("a dense normal is not unit");
     for (const auto& s : profile)
-        if (!std::isfinite(s.value) || !std::isfinite(s.lo) || !std::isfinite(s.hi) || s.lo > s.hi)
-            return bad("a profile segment is not finite or runs backwards");
+        if (!std::isfinite(s.r0) || !std::isfinite(s.z0) || !std::isfinite(s.r1) ||
+            !std::isfinite(s.z1) || s.r0 < 0 || s.r1 < 0 || (s.r0 == s.r1 && s.z0 == s.z1))
+            return bad("a profile segment is not finite, has a negative radius or no length");
     for (auto r : refs)
         if (r >= points.size()) return bad("a reference index is out of range");
     if (static_cast<double>(n_keys()) * 4 > 4e9) return bad("table too large");

@@ -10,7 +10,7 @@
 
 namespace hotgauge::io {
 
-inline constexpr std::uint32_t kModelFormatVersion = 1;
+inline constexpr std::uint32_t kModelFormatVersion = 2;
 
 // Refuses a model that fails model.validate(); writes FILE.tmp, then renames it over `path`, so
 // a reader never sees a half-written file.

@@ -26,6 +26,14 @@ struct ModelConfig {
 
 inline constexpr std::uint32_t kNoKey = 0xffffffffu;
 
+// One segment of an axisymmetric model's (r, z) boundary, with the material on its left going
+// from (r0, z0) to (r1, z1): its outward normal is (z1 − z0, r0 − r1) / length. `wall`: a
+// cylinder or a drafted cone, whose radius ICP may free as a nuisance unknown.
+struct ProfileSegment {
+    double r0 = 0, z0 = 0, r1 = 0, z1 = 0;
+    bool wall = false;
+};
+
 // Angle of p2 about the x axis once (p1, n1) is moved to the origin with n1 along +x
 // (the α of Drost et al.); the model's and the scene's angles differ by the pose's rotation.
 float pair_angle(const Eigen::Vector3f& p1, const Eigen::Vector3f& n1, const Eigen::Vector3f& p2);
@@ -51,7 +59,7 @@ struct Model {
     std::vector<Eigen::Vector3f> points, normals;
     std::vector<std::uint32_t> refs;
     // The ICP surface: the (r, z) boundary of an axisymmetric model, or dense oriented samples.
-    std::vector<core::AxisymmetricSolid::Segment> profile;
+    std::vector<ProfileSegment> profile;
     std::vector<Eigen::Vector3f> dense_points, dense_normals;
     // Quantised features → entries, compressed rows: entries[key_begin[k] .. key_begin[k+1]).
     std::vector<std::uint32_t> key_begin;
@@ -66,7 +74,11 @@ struct Model {
     core::Result<void> validate() const;
 };
 
-// From a recipe's nominal cold geometry (axisymmetric, meridian references).
+// From a recipe's nominal cold geometry (axisymmetric, meridian references). A recipe with a
+// forging drawing gives the part as drawn at half the drawing's limits (every wall drafted by
+// half its largest draft, every corner filleted at half its largest radius: the shape nearest to
+// every part the drawing allows), so that a forged part's walls and corners lie on the model;
+// without one, the sharp, vertical idealisation.
 core::Result<Model> model_from_recipe(const core::Recipe& recipe, const ModelConfig& config = {});
 
 // From oriented surface samples in the part frame (a mesh or a reference scan, sampled densely,
