@@ -900,7 +900,9 @@ TEST(ForgedCorners, OuterDiametersDoNotDependOnMicrometresOfPose) {
         T.prerotate(Eigen::AngleAxisd(rad(rng), Eigen::Vector3d::UnitX()) *
                     Eigen::AngleAxisd(rad(rng), Eigen::Vector3d::UnitY()));
         T.pretranslate(Eigen::Vector3d(mm(rng), mm(rng), mm(rng)));
-        for (const auto& [name, mm_k] : outer(T)) {
+        const auto moved = outer(T);
+        EXPECT_EQ(moved.size(), 4u) << "pose " << k;
+        for (const auto& [name, mm_k] : moved) {
             EXPECT_NEAR(mm_k, truth.at(name), 0.010) << name << ", pose " << k;
             worst = std::max(worst, std::abs(mm_k - truth.at(name)));
         }

@@ -370,10 +370,13 @@ TEST(MatchInTheLoop, AFeature1_5mmOffIsFoundAndFollowed) {
         auto s = sim::simulate(env().recipe, cell, o);
         ASSERT_TRUE(s);
         const auto r = pipeline::run(s->recording, env().recipe, {});
-        ASSERT_TRUE(r.match && r.match->found) << name << ": " << r.match->reason;
+        ASSERT_TRUE(r.match && r.match->found)
+            << name << ": " << (r.match ? r.match->reason : "no match ran");
+        int seen = 0;
         for (std::size_t j = 0; j < r.measurement.features.size(); ++j) {
             const auto& f = r.measurement.features[j];
             if (f.name != name) continue;
+            ++seen;
             ASSERT_TRUE(f.hot_mm) << f.name << ": " << f.reason;
             // The quick cell's 0.8 mm rays and 1 mm profiles: ±0.05 mm, not the full cell's ±0.02.
             EXPECT_NEAR(*f.hot_mm, s->truth.features[j].hot_mm, 0.05) << name;
@@ -382,6 +385,7 @@ TEST(MatchInTheLoop, AFeature1_5mmOffIsFoundAndFollowed) {
             std::printf("%s %+.1f mm: score %.3f, error %+.4f mm\n", name, mm, r.match->score,
                         *f.hot_mm - s->truth.features[j].hot_mm);
         }
+        EXPECT_EQ(seen, 1) << name;
     }
 }
 

@@ -450,6 +450,14 @@ TEST_F(ModelFile, NonFiniteNumbersBehindAGoodChecksumAreRefused) {
                                             segment.r1, segment.z1};
     const std::string e = replaced(stored.data(), infinite.data(), sizeof stored);
     EXPECT_NE(e.find("a profile segment is not finite"), std::string::npos) << e;
+    // A negative radius, a point 100 m away, a segment of no length: refused alike.
+    for (const std::array<double, 4>& bad :
+         {std::array<double, 4>{-1.0, segment.z0, segment.r1, segment.z1},
+          std::array<double, 4>{segment.r0, 1e5, segment.r1, segment.z1},
+          std::array<double, 4>{segment.r0, segment.z0, segment.r0, segment.z0}}) {
+        const std::string why = replaced(stored.data(), bad.data(), sizeof stored);
+        EXPECT_NE(why.find("a profile segment is not finite, outside"), std::string::npos) << why;
+    }
 }
 
 // Random edits of the body behind a recomputed checksum: whatever the reader makes of them, it

@@ -154,6 +154,8 @@ Closest Surface::closest_profile(const Eigen::Vector3f& q, float scale) const {
             seg = static_cast<int>(si);
         }
     }
+    if (seg < 0)  // no segment at a finite distance (a non-finite query)
+        return {q, Eigen::Vector3f::UnitZ(), std::numeric_limits<float>::infinity(), -1};
     const Seg& g = segs_[static_cast<std::size_t>(seg)];
     const float cr = g.r0 + t_best * g.ur, cz = g.z0 + t_best * g.uz;
     const bool corner = t_best <= 0.0f || t_best >= g.len;
@@ -175,8 +177,8 @@ namespace {
 
 // The walls' nuisance unknowns when ICP frees them (IcpOptions::free_radii): each wall's offset δ
 // along its normal and tilt β about its middle, in columns `first + 2j` and `first + 2j + 1`. A
-// wall's own segment moves with both; the short segments joined to it end to end (a fillet's
-// chords, up to the next long segment) with its offset.
+// wall's own segment moves with both; the fillet chords joined to it end to end (up to a flat or
+// another wall) with its offset.
 class Walls {
   public:
     Walls(const Model& model, bool free, int first) : first_(first) {
@@ -185,18 +187,14 @@ class Walls {
         normal_.assign(p.size(), Eigen::Vector2f::Zero());
         own_.assign(p.size(), 0);
         if (!free) return;
-        constexpr double kChordMm = 1.0;
-        auto length = [&](std::size_t k) {
-            return std::hypot(p[k].r1 - p[k].r0, p[k].z1 - p[k].z0);
-        };
-        auto chord_of = [&](std::size_t a, std::size_t b) {  // b is a short piece joined to a
+        auto chord_of = [&](std::size_t a, std::size_t b) {  // b: a fillet chord joined to a
             const bool joined = a < b ? p[a].r1 == p[b].r0 && p[a].z1 == p[b].z0
                                       : p[b].r1 == p[a].r0 && p[b].z1 == p[a].z0;
-            return joined && !p[b].wall && length(b) < kChordMm && wall_[b] < 0;
+            return joined && p[b].fillet_chord() && wall_[b] < 0;
         };
         for (std::size_t k = 0; k < p.size(); ++k) {
             if (!p[k].wall) continue;
-            const double len = length(k);
+            const double len = p[k].length();
             const Eigen::Vector2f n(static_cast<float>((p[k].z1 - p[k].z0) / len),
                                     static_cast<float>((p[k].r0 - p[k].r1) / len));
             auto claim = [&](std::size_t q) {

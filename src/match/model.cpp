@@ -247,19 +247,20 @@ core::Result<Model> model_from_recipe(const core::Recipe& recipe, const ModelCon
     m.axisymmetric = true;
     m.profile = std::move(*profile);
     // Meridian samples (r, z) with their outward normals, then revolved: the sample at azimuth 0
-    // of each meridian sample is a reference point. A fillet's chords (under a millimetre) share
-    // their samples: one where their run has gathered a sampling distance, not one each.
+    // of each meridian sample is a reference point. A fillet's chords share their samples: one
+    // where their run has gathered a sampling distance, not one each.
     const double s = config.sampling_mm;
-    constexpr double kChordMm = 1.0;
     double run = 0;
     for (const auto& seg : m.profile) {
         const double dr = seg.r1 - seg.r0, dz = seg.z1 - seg.z0, len = std::hypot(dr, dz);
         const double nr = dz / len, nz = -dr / len;
         int n = std::max(1, static_cast<int>(std::lround(len / s)));
-        if (len < kChordMm) {
+        if (seg.fillet_chord()) {
             run += len;
             n = run >= s ? 1 : 0;
             if (n) run = 0;
+        } else {
+            run = 0;
         }
         for (int q = 0; q < n; ++q) {
             const double t = (q + 0.5) / n;
@@ -363,10 +364,23 @@ core::Result<void> Model::validate() const {
     for (const auto& n : dense_normals)
         if (!n.allFinite() || std::abs(n.norm() - 1.0f) > 1e-3f)
             return bad("a dense normal is not unit");
+    // ICP's closest-point grid lists segments by a 16-bit index and spans the profile in 1 mm
+    // cells; each wall is two unknowns of a dense normal matrix.
+    constexpr std::size_t kMaxSegments = 65535, kMaxWalls = 256;
+    constexpr double kMaxMm = 1e4, kMinLengthMm = 1e-6;
+    if (profile.size() > kMaxSegments) return bad("more than 65535 profile segments");
+    const auto inside = [&](double v, double lo) {
+        return std::isfinite(v) && v >= lo && v <= kMaxMm;
+    };
     for (const auto& s : profile)
-        if (!std::isfinite(s.r0) || !std::isfinite(s.z0) || !std::isfinite(s.r1) ||
-            !std::isfinite(s.z1) || s.r0 < 0 || s.r1 < 0 || (s.r0 == s.r1 && s.z0 == s.z1))
-            return bad("a profile segment is not finite, has a negative radius or no length");
+        if (!inside(s.r0, 0.0) || !inside(s.r1, 0.0) || !inside(s.z0, -kMaxMm) ||
+            !inside(s.z1, -kMaxMm) || !(s.length() >= kMinLengthMm))
+            return bad(
+                "a profile segment is not finite, outside ±10 m, has a negative radius or "
+                "no length");
+    if (std::count_if(profile.begin(), profile.end(), [](const auto& s) { return s.wall; }) >
+        static_cast<std::ptrdiff_t>(kMaxWalls))
+        return bad("more than 256 walls in the profile");
     for (auto r : refs)
         if (r >= points.size()) return bad("a reference index is out of range");
     if (static_cast<double>(n_keys()) * 4 > 4e9) return bad("table too large");

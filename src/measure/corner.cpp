@@ -162,22 +162,22 @@ struct Prior1 {
 };
 // The fit's thinning (kFitSamples below) in two strata: the samples beyond the plane by more than
 // kBeyondMm (the fillet's and the wall's: what fixes the corner, a few hundred on a short wall)
-// and the rest (the plane's, the bulk). Each kept sample stands for its stratum's stride.
+// and the rest (the plane's, the bulk). Each kept sample stands for 1 / its stratum's fraction.
 constexpr double kBeyondMm = 0.15;
 struct Thinning {
-    std::array<std::size_t, 2> stride{1, 1};  // near the plane, beyond it
-    std::size_t of(const CornerPoint& p) const { return stride[p.h < -kBeyondMm ? 1 : 0]; }
-    double weight(const CornerPoint& p) const { return static_cast<double>(of(p)); }
+    std::array<double, 2> keep{1.0, 1.0};  // the fraction kept: near the plane, beyond it
+    double of(const CornerPoint& p) const { return keep[p.h < -kBeyondMm ? 1 : 0]; }
+    double weight(const CornerPoint& p) const { return 1.0 / of(p); }
 };
 
 // The normal equations of the thinned samples `use` at v (no priors): JᵀJ, Jᵀe and the sum of
-// squares, each fitted sample standing for its stratum's stride of them; n, the samples they
-// stand for.
+// squares, each fitted sample standing for 1 / its stratum's fraction of them; n, the samples
+// they stand for.
 struct Normal {
     Mat7 A = Mat7::Zero();
     Vec7 b = Vec7::Zero();
     double sse = 0;
-    std::size_t n = 0;
+    double n = 0;
 };
 Normal normal_equations(const std::vector<CornerPoint>& pts, const std::vector<char>& use,
                         double side, const Vec7& v, const Thinning& th) {
@@ -189,7 +189,7 @@ Normal normal_equations(const std::vector<CornerPoint>& pts, const std::vector<c
         out.A.noalias() += (w * g) * g.transpose();  // fixed-size: far faster than rankUpdate
         out.b += (w * e) * g;
         out.sse += w * e * e;
-        out.n += th.of(pts[q]);
+        out.n += w;
     }
     return out;
 }
@@ -223,7 +223,7 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
         return c;
     };
     Normal raw = normal_equations(pts, use, side, x, th);  // at x, without the priors
-    const auto n = static_cast<double>(std::max<std::size_t>(raw.n, 1));
+    const double n = std::max(raw.n, 1.0);
     sigma2 = std::max(raw.sse / n, 1e-6);
     Mat7 A;
     Vec7 b;
@@ -297,30 +297,36 @@ double corner_residual(const CornerModel& m, double side, const CornerPoint& p, 
 namespace {
 
 // The fit runs on a thinning to about kFitSamples (a corner's seven parameters need far fewer
-// than the 10 000-50 000 samples near it; each fitted one stands for its stride, so u is that of
-// all); inliers and counts are taken on all of them. Beyond the plane at most half of them, the
-// plane the rest. A sample is kept by a hash of its key, so that which are kept does not depend
-// on which samples the window took in: every stride-th of the window's list had moved a recess
-// corner 5 µm on the radius when a pose 1 µm apart let a few samples more in at the window's
+// than the 10 000-50 000 samples near it; each fitted one stands for 1 / its stratum's fraction,
+// so u is that of all); inliers and counts are taken on all of them. Beyond the plane at most half
+// of them, the plane the rest. A sample is kept by a hash of its key, so that which are kept does
+// not depend on which samples the window took in: every stride-th of the window's list had moved a
+// recess corner 5 µm on the radius when a pose 1 µm apart let a few samples more in at the window's
 // edge (independent-forged-401's Diameter 5 read +0.014, +0.017 or +0.028 mm by pose).
 constexpr std::size_t kFitSamples = 6000;
 Thinning thinning(const std::vector<CornerPoint>& pts) {
-    const auto beyond = static_cast<std::size_t>(std::count_if(
+    const auto beyond = static_cast<double>(std::count_if(
         pts.begin(), pts.end(), [](const CornerPoint& p) { return p.h < -kBeyondMm; }));
+    const double near = static_cast<double>(pts.size()) - beyond, half = kFitSamples / 2.0;
     Thinning th;
-    th.stride[1] = std::max<std::size_t>(1, beyond / (kFitSamples / 2));
-    const std::size_t left = kFitSamples - std::min(beyond / th.stride[1], kFitSamples / 2);
-    th.stride[0] = std::max<std::size_t>(1, (pts.size() - beyond) / left);
+    th.keep[1] = beyond > half ? half / beyond : 1.0;
+    const double left = kFitSamples - beyond * th.keep[1];
+    th.keep[0] = near > left ? left / near : 1.0;
     return th;
 }
+// A sample is kept when the hash of its key, as a fraction in [0, 1), is below its stratum's
+// fraction: a window a few samples larger keeps the same ones and a few more (the kept sets
+// are nested), not another draw.
 bool thinned_in(const std::vector<CornerPoint>& pts, std::size_t q, const Thinning& th) {
-    const std::size_t stride = th.of(pts[q]);
-    if (pts[q].sample < 0) return q % stride == 0;  // no sample key: every stride-th
-    std::uint64_t h = static_cast<std::uint64_t>(pts[q].sample) * 0x9E3779B97F4A7C15ull;
+    const double keep = th.of(pts[q]);
+    if (keep >= 1.0) return true;
+    std::uint64_t h = static_cast<std::uint64_t>(pts[q].sample >= 0 ? pts[q].sample
+                                                                    : static_cast<std::int64_t>(q));
+    h *= 0x9E3779B97F4A7C15ull;
     h ^= h >> 29;
     h *= 0xBF58476D1CE4E5B9ull;
     h ^= h >> 32;
-    return h % stride == 0;
+    return static_cast<double>(h >> 11) * 0x1.0p-53 < keep;
 }
 double inlier_threshold(double rms) { return std::max(3.0 * rms, 0.02); }
 

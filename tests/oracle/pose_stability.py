@@ -48,6 +48,8 @@ def main():
     T0 = base["match"]["world_from_part"]
     ref = {f["name"]: f["hot_mm"] for f in base["features"]
            if f["kind"] == "diameter" and f["hot_mm"] is not None}
+    if len(ref) < 3:
+        sys.exit(f"{a.rec}: only {len(ref)} diameters measured at the matched pose")
     rng = random.Random(1)
     worst, bad = 0.0, []
     with tempfile.TemporaryDirectory() as tmp:
@@ -56,7 +58,10 @@ def main():
             with open(pose, "w") as f:
                 f.write("world_from_part: " + json.dumps(moved(T0, rng)) + "\n")
             for f in measure(a.hotgauge, a.rec, pose)["features"]:
-                if f["name"] not in ref or f["hot_mm"] is None:
+                if f["name"] not in ref:
+                    continue
+                if f["hot_mm"] is None:
+                    bad.append(f"pose {k}: {f['name']} not measured: {f.get('reason')}")
                     continue
                 d = 1000 * (f["hot_mm"] - ref[f["name"]])
                 worst = max(worst, abs(d))

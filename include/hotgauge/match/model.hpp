@@ -8,6 +8,7 @@
 // that meridian and the spin is fixed by convention (match.hpp), instead of the votes being split
 // over all azimuths.
 #include <Eigen/Core>
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -32,6 +33,12 @@ inline constexpr std::uint32_t kNoKey = 0xffffffffu;
 struct ProfileSegment {
     double r0 = 0, z0 = 0, r1 = 0, z1 = 0;
     bool wall = false;
+    double length() const { return std::hypot(r1 - r0, z1 - z0); }
+    // A piece of a fillet's arc: short, neither a wall nor flat nor upright.
+    bool fillet_chord() const {
+        constexpr double kChordMm = 1.0;
+        return !wall && z0 != z1 && r0 != r1 && length() < kChordMm;
+    }
 };
 
 // Angle of p2 about the x axis once (p1, n1) is moved to the origin with n1 along +x
