@@ -121,9 +121,11 @@ soak: build
 	/usr/bin/python3 tests/soak.py --bin-dir $(BUILD) --parts $(SOAK_PARTS) --seed $(SOAK_SEED) \
 	  --lines $(SOAK_LINES) --out $(SOAK_OUT)
 
-test: build build-asan
-	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
-	cd $(BUILD_ASAN) && ctest --output-on-failure -j $(JOBS) -L unit
+# Every test of both builds (tests/run_all.sh): the real-time tests of the virtual line while the
+# sanitizer build compiles at nice 19, then the other tests on all cores, then the sanitizer
+# build's unit tests.
+test: build $(BUILD_ASAN)/CMakeCache.txt
+	tests/run_all.sh $(BUILD) $(BUILD_ASAN) $(JOBS)
 
 bench: build
 	cmake --build $(BUILD) -j $(JOBS) --target hotgauge_bench_match
