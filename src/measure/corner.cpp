@@ -38,51 +38,65 @@ struct Ortho {
 Eigen::Vector2d far_centre(const CornerModel& m, double k) {
     return {m.rho2 * k + m.t * (m.depth - m.rho2), m.rho2 - m.depth};
 }
+// What the profile's distance needs of the model, computed once per pass over the samples, not
+// once per sample (the corner fits are half of a forged part's measurement).
+struct Shape {
+    CornerModel m;
+    double k;               // √(1 + t²)
+    Eigen::Vector2d c;      // the fillet's centre: rho from the plane and the wall, in the material
+    Eigen::Vector2d n2;     // the wall's normal, out of the material
+    Eigen::Vector2d down;   // along the wall, away from the plane
+    Eigen::Vector2d c_end;  // where the fillet meets the wall
+    Eigen::Vector2d c2;     // the far fillet's centre
+    Eigen::Vector2d c2_end;  // where the far fillet meets the wall
+    explicit Shape(const CornerModel& model)
+        : m(model),
+          k(std::sqrt(1.0 + m.t * m.t)),
+          c(-m.rho * k + m.t * m.rho, -m.rho),
+          n2(1.0 / k, m.t / k),
+          down(m.t / k, -1.0 / k),
+          c_end(c + m.rho * n2),
+          c2(far_centre(m, k)),
+          c2_end(c2 - m.rho2 * n2) {}
+};
 // Beyond the wall's lower end (a far corner): the concave fillet about c2, then the far level.
-void far_corner(const CornerModel& m, double k, const Eigen::Vector2d& ps, Ortho& o) {
-    const Eigen::Vector2d c2 = far_centre(m, k);
-    if (ps.x() >= c2.x()) {
+void far_corner(const Shape& g, const Eigen::Vector2d& ps, Ortho& o) {
+    const CornerModel& m = g.m;
+    if (ps.x() >= g.c2.x()) {
         o.where = 4;
         o.e = ps.y() + m.depth;
         o.de_ddepth = 1.0;
         return;
     }
     o.where = 3;
-    const Eigen::Vector2d dv = ps - c2;
+    const Eigen::Vector2d dv = ps - g.c2;
     const double L = std::max(dv.norm(), 1e-12);
     o.e = m.rho2 - L;  // nearer c2 than rho2: out of the material
     o.n = -dv / L;
     // e moves with c2 as −n·dc2: dc2/dt, dc2/drho2, dc2/ddepth.
-    o.de_dt = -o.n.x() * (m.rho2 * m.t / k + m.depth - m.rho2);
-    o.de_drho2 = 1.0 - o.n.x() * (k - m.t) - o.n.y();
+    o.de_dt = -o.n.x() * (m.rho2 * m.t / g.k + m.depth - m.rho2);
+    o.de_drho2 = 1.0 - o.n.x() * (g.k - m.t) - o.n.y();
     o.de_ddepth = -o.n.x() * m.t + o.n.y();
 }
-Ortho ortho(const CornerModel& m, double s, double h) {
-    const double k = std::sqrt(1.0 + m.t * m.t);
-    // Fillet centre (s_c, h_c): rho from the plane and from the wall, inside the material.
-    const Eigen::Vector2d c(-m.rho * k + m.t * m.rho, -m.rho);
-    const Eigen::Vector2d n2(1.0 / k, m.t / k);     // wall normal, out of the material
-    const Eigen::Vector2d down(m.t / k, -1.0 / k);  // along the wall, away from the plane
+Ortho ortho(const Shape& g, double s, double h) {
+    const CornerModel& m = g.m;
+    const double k = g.k;
     const Eigen::Vector2d ps(s, h);
     Ortho o;
-    // Where the far fillet meets the wall: its centre less rho2 along the wall's normal.
-    const auto past_wall = [&] {
-        return m.depth > 0.0 && (ps - (far_centre(m, k) - m.rho2 * n2)).dot(down) >= 0.0;
-    };
-    if (s <= c.x()) {
+    if (s <= g.c.x()) {
         o.e = h;
-    } else if ((ps - (c + m.rho * n2)).dot(down) >= 0.0) {
-        if (past_wall()) {
-            far_corner(m, k, ps, o);
+    } else if ((ps - g.c_end).dot(g.down) >= 0.0) {
+        if (m.depth > 0.0 && (ps - g.c2_end).dot(g.down) >= 0.0) {  // past the wall
+            far_corner(g, ps, o);
             return o;
         }
         o.where = 2;
         o.e = (s + m.t * h) / k;
-        o.n = n2;
+        o.n = g.n2;
         o.de_dt = h / k - (s + m.t * h) * m.t / (k * k * k);
     } else {
         o.where = 1;
-        const Eigen::Vector2d dv = ps - c;
+        const Eigen::Vector2d dv = ps - g.c;
         const double D = std::max(dv.norm(), 1e-12);
         o.e = D - m.rho;
         o.n = dv / D;
@@ -104,14 +118,15 @@ Ortho ortho(const CornerModel& m, double s, double h) {
 // wherever the jumps left it: up to 13 µm apart between two convergence tolerances (a forged
 // part's Diameter 5); now 0.001 µm.
 constexpr double kGrazing = 0.2;
-double residual(const CornerModel& m, double side, const CornerPoint& p, Vec7* grad, int* part) {
+double residual(const Shape& shape, double side, const CornerPoint& p, Vec7* grad, int* part) {
+    const CornerModel& m = shape.m;
     const Eigen::Vector2d d = p.q - m.centre;
     const double r = std::max(d.norm(), 1e-9);
     const double s = side * (r - m.radius), h = p.h;
     // ds/d(cx, cy, radius); s does not depend on t or rho.
     const Eigen::Vector2d ds_dc = -side * d / r;
     const double ds_dr0 = -side;
-    Ortho o = ortho(m, s, h);
+    Ortho o = ortho(shape, s, h);
     double e = o.e, scale = 1.0;
     if (p.ray.squaredNorm() > 0.0) {
         const Eigen::Vector2d ray(side * p.ray.x(), p.ray.y());  // (s, h), towards the sensor
@@ -123,7 +138,7 @@ double residual(const CornerModel& m, double side, const CornerPoint& p, Vec7* g
             ok = std::abs(nd) >= kGrazing;
             if (!ok) break;
             lambda -= at.e / nd;
-            at = ortho(m, s + lambda * ray.x(), h + lambda * ray.y());
+            at = ortho(shape, s + lambda * ray.x(), h + lambda * ray.y());
             if (std::abs(at.e) < 1e-9) break;
         }
         if (ok && std::abs(at.n.dot(ray)) >= kGrazing && std::abs(at.e) < 1e-6) {
@@ -161,12 +176,12 @@ struct Prior1 {
     double mean, sigma, hold, hold_u;
 };
 // The fit's thinning (kFitSamples below) in two strata: the samples beyond the plane by more than
-// kBeyondMm (the fillet's and the wall's: what fixes the corner, a few hundred on a short wall)
-// and the rest (the plane's, the bulk). Each kept sample stands for 1 / its stratum's fraction.
-constexpr double kBeyondMm = 0.15;
+// kBeyondPlaneMm (the fillet's and the wall's: what fixes the corner, a few hundred on a short
+// wall) and the rest (the plane's, the bulk). Each kept sample stands for 1 / its stratum's
+// fraction.
 struct Thinning {
     std::array<double, 2> keep{1.0, 1.0};  // the fraction kept: near the plane, beyond it
-    double of(const CornerPoint& p) const { return keep[p.h < -kBeyondMm ? 1 : 0]; }
+    double of(const CornerPoint& p) const { return keep[p.beyond_plane() ? 1 : 0]; }
     double weight(const CornerPoint& p) const { return 1.0 / of(p); }
 };
 
@@ -182,14 +197,17 @@ struct Normal {
 Normal normal_equations(const std::vector<CornerPoint>& pts, const std::vector<char>& use,
                         double side, const Vec7& v, const Thinning& th) {
     Normal out;
+    const Shape shape(from(v));
     for (std::size_t q = 0; q < pts.size(); ++q) {
         if (!use[q]) continue;
         Vec7 g;
-        const double e = residual(from(v), side, pts[q], &g, nullptr), w = th.weight(pts[q]);
-        out.A.noalias() += (w * g) * g.transpose();  // fixed-size: far faster than rankUpdate
-        out.b += (w * e) * g;
+        int part = 0;
+        const double e = residual(shape, side, pts[q], &g, &part), w = th.weight(pts[q]);
         out.sse += w * e * e;
         out.n += w;
+        if (part == 0) continue;  // on the plane, h: no parameter moves it (g = 0)
+        out.A.noalias() += (w * g) * g.transpose();  // fixed-size: far faster than rankUpdate
+        out.b += (w * e) * g;
     }
     return out;
 }
@@ -291,7 +309,7 @@ double CornerPrior::t_sigma() const {
 }
 
 double corner_residual(const CornerModel& m, double side, const CornerPoint& p, int* part) {
-    return residual(m, side, p, nullptr, part);
+    return residual(Shape(m), side, p, nullptr, part);
 }
 
 namespace {
@@ -306,7 +324,7 @@ namespace {
 constexpr std::size_t kFitSamples = 6000;
 Thinning thinning(const std::vector<CornerPoint>& pts) {
     const auto beyond = static_cast<double>(std::count_if(
-        pts.begin(), pts.end(), [](const CornerPoint& p) { return p.h < -kBeyondMm; }));
+        pts.begin(), pts.end(), [](const CornerPoint& p) { return p.beyond_plane(); }));
     const double near = static_cast<double>(pts.size()) - beyond, half = kFitSamples / 2.0;
     Thinning th;
     th.keep[1] = beyond > half ? half / beyond : 1.0;
@@ -333,16 +351,16 @@ double inlier_threshold(double rms) { return std::max(3.0 * rms, 0.02); }
 // `rounds` times: the solve on the thinned samples `use`, then as `use` the thinned samples within
 // the inlier threshold of its solution.
 Solve robust_solve(const std::vector<CornerPoint>& pts, std::vector<char>& use, double side, Vec7 x,
-                   const CornerPrior& prior, int rounds) {
-    const Thinning th = thinning(pts);
+                   const CornerPrior& prior, const Thinning& th, int rounds) {
     Solve s;
     for (int round = 0; round < rounds; ++round) {
         s = solve(pts, use, side, x, prior, th);
         x = s.x;
         const double thr = inlier_threshold(s.rms);
+        const Shape shape(from(x));
         for (std::size_t q = 0; q < pts.size(); ++q)
             use[q] = thinned_in(pts, q, th) &&
-                     std::abs(residual(from(x), side, pts[q], nullptr, nullptr)) <= thr;
+                     std::abs(residual(shape, side, pts[q], nullptr, nullptr)) <= thr;
     }
     return s;
 }
@@ -363,17 +381,18 @@ double radius_u(const Solve& s) {
 // the profile, sectors, u (formal, or the jackknife's when `jackknife` and larger) and, for a fit
 // whose u is `reported`, each profile's radial weight.
 CornerFit summarize(const std::vector<CornerPoint>& pts, double side, const Solve& s,
-                    const std::vector<char>& use, const CornerPrior& prior, bool reported,
-                    bool jackknife) {
+                    const std::vector<char>& use, const CornerPrior& prior, const Thinning& th,
+                    bool reported, bool jackknife) {
     const double thr = inlier_threshold(s.rms);
     CornerFit out;
     out.m = from(s.x);
     out.rms = s.rms;
     std::vector<double> sum(8, 0.0);
     std::vector<int> cnt(8, 0);
+    const Shape shape(out.m);
     for (std::size_t q = 0; q < pts.size(); ++q) {  // every sample: inlier, part, sector
         int part = 0;
-        const double e = residual(out.m, side, pts[q], nullptr, &part);
+        const double e = residual(shape, side, pts[q], nullptr, &part);
         if (std::abs(e) > thr) continue;
         (part == 0 ? out.n_plane : part == 1 ? out.n_arc : part == 2 ? out.n_wall : out.n_far)++;
         if (part == 0 || part >= 3) continue;  // the corner's circle: its fillet and wall
@@ -405,7 +424,7 @@ CornerFit summarize(const std::vector<CornerPoint>& pts, double side, const Solv
     out.u_radius = radius_u(s);
     if (std::isfinite(out.u_radius)) {
         if (jackknife) {
-            out.u_jackknife = jackknife_u(pts, use, side, s.x, prior, thinning(pts));
+            out.u_jackknife = jackknife_u(pts, use, side, s.x, prior, th);
             out.u_radius = std::max(out.u_radius, out.u_jackknife);
         }
     }
@@ -426,8 +445,8 @@ CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const Cor
         if (x[5] <= 0.0) x[5] = 0.5 * prior.rho_max;
         if (x[6] <= 0.0) x[6] = prior.depth;
     }
-    const Solve s = robust_solve(pts, use, side, x, prior, 3);
-    return summarize(pts, side, s, use, prior, jackknife, jackknife);
+    const Solve s = robust_solve(pts, use, side, x, prior, th, 3);
+    return summarize(pts, side, s, use, prior, th, jackknife, jackknife);
 }
 
 CornerFit refit_draft(const std::vector<CornerPoint>& pts, double side, const CornerFit& held,
@@ -435,15 +454,16 @@ CornerFit refit_draft(const std::vector<CornerPoint>& pts, double side, const Co
     const Thinning th = thinning(pts);
     const double thr = inlier_threshold(held.rms);
     std::vector<char> use(pts.size(), 0);
+    const Shape shape(held.m);
     for (std::size_t q = 0; q < pts.size(); ++q)
         use[q] = thinned_in(pts, q, th) &&
-                 std::abs(residual(held.m, side, pts[q], nullptr, nullptr)) <= thr;
+                 std::abs(residual(shape, side, pts[q], nullptr, nullptr)) <= thr;
     Vec7 x = to(held.m);
     x[3] = prior.t_mean();
     // Twice: the held fit's inliers are those of the drawing's draft, which may take in wall
     // samples the side draft puts outside (and the solve on them stops 20-40 µm off).
-    const Solve s = robust_solve(pts, use, side, x, prior, 2);
-    CornerFit out = summarize(pts, side, s, use, prior, true, false);
+    const Solve s = robust_solve(pts, use, side, x, prior, th, 2);
+    CornerFit out = summarize(pts, side, s, use, prior, th, true, false);
     // The jackknife measures the profiles' shared errors, which a change of draft leaves alone.
     out.u_jackknife = held.u_jackknife;
     out.u_radius = std::max(out.u_radius, held.u_jackknife);

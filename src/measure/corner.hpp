@@ -35,6 +35,8 @@ struct EdgePlane {
 // (positive out of the material, towards the sensor that sees the plane), and its ray towards the
 // sensor: (component away from the axis, component along h); (0, 0): unknown, the residual is
 // the distance along the profile's normal.
+// Below the plane by more than 3σ of the range noise: beyond it (a fillet's or a wall's sample).
+constexpr double kBeyondPlaneMm = 0.15;
 struct CornerPoint {
     Eigen::Vector2d q;
     double h;
@@ -45,6 +47,7 @@ struct CornerPoint {
     // The sample itself (unique over the faces), or −1: the fit's thinning keeps a sample by it,
     // not by the sample's place in a window's list.
     std::int64_t sample = -1;
+    bool beyond_plane() const { return h < -kBeyondPlaneMm; }
 };
 
 // The corner's profile in the half-plane (s, h) about `centre`: s = side·(r − radius) is how far

@@ -32,8 +32,6 @@ double corner_slack(const Context& ctx, double R_e) {
 // Fewer samples than this beyond the plane (fillet and wall): the edge is sharp, or its wall out
 // of view, and the edge brackets measure it.
 constexpr std::int64_t kMinProfileSamples = 200;
-// Below the plane by more than 3σ of the range noise: beyond it (a fillet's or a wall's sample).
-constexpr double kBeyondPlaneMm = 0.15;
 // A fitted fillet smaller than this, or than kSharpRhoNoise times the profile's scatter, is a
 // sharp edge: the brackets pin it better than the profile. Within a few σ of the range noise a
 // fillet cannot be told from the noise below a sharp edge's plane (an ideal part at σ 0.1 mm:
@@ -289,7 +287,7 @@ CornerMemo plane_faces_corner(const Context& ctx, const core::FeatureSpec& f,
         // Nothing beyond the plane (a sharp edge over a wall no sensor of the plane sees: every
         // edge of an ideal part): the edge brackets, without a profile fit that would say so.
         out.brackets = pass == 0 && std::count_if(pts.begin(), pts.end(), [](const CornerPoint& p) {
-                                        return p.h < -kBeyondPlaneMm;
+                                        return p.beyond_plane();
                                     }) < kMinProfileSamples;
         if (out.brackets) return out;
         out.fit = fit_corner(pts, side, {m.centre, m.radius, m.t, m.rho}, prior, false);
