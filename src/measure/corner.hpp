@@ -31,12 +31,13 @@ struct EdgePlane {
     Eigen::Vector2d axis2d() const;
 };
 
+// Below the plane by more than 3σ of the range noise: beyond it (a fillet's or a wall's sample).
+constexpr double kBeyondPlaneMm = 0.15;
+
 // A sample in the level plane's frame: q its in-plane coordinates, h its height above the plane
 // (positive out of the material, towards the sensor that sees the plane), and its ray towards the
 // sensor: (component away from the axis, component along h); (0, 0): unknown, the residual is
 // the distance along the profile's normal.
-// Below the plane by more than 3σ of the range noise: beyond it (a fillet's or a wall's sample).
-constexpr double kBeyondPlaneMm = 0.15;
 struct CornerPoint {
     Eigen::Vector2d q;
     double h;
