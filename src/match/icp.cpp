@@ -66,7 +66,7 @@ float Surface::Seg::distance(float r, float z, float& t) const {
 
 void Surface::build_profile_grid() {
     for (const auto& s : model_.profile) {
-        const double dr = s.r1 - s.r0, dz = s.z1 - s.z0, len = std::hypot(dr, dz);
+        const double dr = s.r1 - s.r0, dz = s.z1 - s.z0, len = s.length();
         segs_.push_back({static_cast<float>(s.r0), static_cast<float>(s.z0),
                          static_cast<float>(dr / len), static_cast<float>(dz / len),
                          static_cast<float>(len), static_cast<float>(dz / len),

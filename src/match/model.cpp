@@ -252,7 +252,7 @@ core::Result<Model> model_from_recipe(const core::Recipe& recipe, const ModelCon
     const double s = config.sampling_mm;
     double run = 0;
     for (const auto& seg : m.profile) {
-        const double dr = seg.r1 - seg.r0, dz = seg.z1 - seg.z0, len = std::hypot(dr, dz);
+        const double dr = seg.r1 - seg.r0, dz = seg.z1 - seg.z0, len = seg.length();
         const double nr = dz / len, nz = -dr / len;
         int n = std::max(1, static_cast<int>(std::lround(len / s)));
         if (seg.fillet_chord()) {
