@@ -17,7 +17,7 @@ DEB_PACKAGES := build-essential cmake pkg-config clang-format \
   libeigen3-dev libpcl-dev libopencv-dev libopencv-contrib-dev libflann-dev \
   libaravis-dev aravis-tools libmodbus-dev mbpoll socat libsystemd-dev systemd \
   libyaml-cpp-dev libspdlog-dev libcli11-dev nlohmann-json3-dev libembree-dev libboost-dev \
-  libgtest-dev libbenchmark-dev \
+  libgtest-dev libbenchmark-dev libceres-dev \
   python3-numpy python3-yaml python3-pymodbus python3-serial-asyncio \
   chromium python3-pil libcpp-httplib-dev \
   libmosquitto-dev mosquitto mosquitto-clients python3-paho-mqtt python3-prometheus-client \

@@ -16,6 +16,7 @@
 #include "hotgauge/calib/clock.hpp"
 #include "hotgauge/sim/geometry.hpp"
 #include "hotgauge/sim/simulator.hpp"
+#include "quick_cell_limits.hpp"
 #include "temp_dir.hpp"
 
 namespace calib = hotgauge::calib;
@@ -137,11 +138,12 @@ TEST(CalibrateClock, RecoversTheVirtualCellsOffset) {
         << clock.error().message;
 }
 
-// The coarse test cell (W/4 rays, 1 mm profiles: 25 times fewer points), for the sanitizer
-// build: the same fit converges, to limits five times the full cell's.
+// The quick cell, for the sanitizer build: the same fit converges, to limits five times the full
+// cell's.
 TEST(CalibrateFaces, QuickCellAligns) {
     const Commissioning c = scan_artifact(7, kConfig + "/artifacts/spheres-6.yaml", false, true);
-    auto cal = calib::calibrate_faces(c.artifact, c.recording, c.nominal);
+    auto cal = calib::calibrate_faces(c.artifact, c.recording, c.nominal,
+                                      hotgauge::test::quick_cell_limits());
     ASSERT_TRUE(cal) << cal.error().message;
     for (const auto& t : c.truth.faces) {
         const calib::FaceGeometry* g = cal->face(t.name);
@@ -159,9 +161,24 @@ TEST(CalibrateFaces, RefusesWhatCannotGiveACalibration) {
     // The certificate of another artifact: the spheres are not where the scan saw balls.
     calib::Artifact other = c.artifact;
     for (auto& s : other.spheres) s.center_mm += Eigen::Vector3d(0, 0, 60);
-    auto r = calib::calibrate_faces(other, c.recording, c.nominal);
+    auto r =
+        calib::calibrate_faces(other, c.recording, c.nominal, hotgauge::test::quick_cell_limits());
+    ASSERT_FALSE(r);
+    EXPECT_NE(r.error().message.find("face top: the recording's geometry put the balls 60."),
+              std::string::npos)
+        << r.error().message;
+    // Balls of another size: none is found.
+    for (auto& s : other.spheres) {
+        s.center_mm -= Eigen::Vector3d(0, 0, 60);
+        s.diameter_mm = 24.0;
+    }
+    r = calib::calibrate_faces(other, c.recording, c.nominal, hotgauge::test::quick_cell_limits());
     ASSERT_FALSE(r);
     EXPECT_NE(r.error().message.find("face top: sees"), std::string::npos) << r.error().message;
+    EXPECT_NE(r.error().message.find("within 40.0 mm of where the recording's geometry puts them; "
+                                     "needs 3"),
+              std::string::npos)
+        << r.error().message;
     // A recording of a part is not an artifact scan.
     hotgauge::core::Recording part = c.recording;
     part.recipe = "hub-a";
@@ -179,7 +196,7 @@ TEST(CalibrateFaces, RefusesWhatCannotGiveACalibration) {
     hotgauge::core::Recording shaken = c.recording;
     for (std::size_t i = 0; i < shaken.faces[1].accel_mps2.size(); i += 3)
         shaken.faces[1].accel_mps2[i] += (i / 3) % 2 ? 0.5f : -0.5f;
-    r = calib::calibrate_faces(c.artifact, shaken, c.nominal);
+    r = calib::calibrate_faces(c.artifact, shaken, c.nominal, hotgauge::test::quick_cell_limits());
     ASSERT_FALSE(r);
     EXPECT_NE(r.error().message.find("face bottom: accelerometer scatter"), std::string::npos)
         << r.error().message;

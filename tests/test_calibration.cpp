@@ -289,3 +289,45 @@ TEST(Calibration, ApplyGeometryReplacesWhatTheCaptureApplied) {
     EXPECT_EQ(same.faces[0].travel_scale, 1.0);
     EXPECT_EQ(same.faces[0].clock_offset_ns, 0);
 }
+
+// `calibrate faces` keeps the pose the artifact recording claimed. A recording that claims that
+// pose, or the calibration's own, takes the calibrated pose; one that places the head elsewhere
+// (another cell's stand-off or start set per part) keeps its placement and takes the calibrated
+// correction of the mount. The key survives write and read.
+TEST(Calibration, ApplyGeometryCorrectsAHeadPlacedElsewhere) {
+    calib::Calibration c = example();
+    calib::FaceGeometry& g = c.faces[0];
+    Eigen::Isometry3d claimed = g.T_world_camera;
+    claimed.translation() += Eigen::Vector3d(0.7, -0.4, 1.5);
+    claimed.linear() =
+        Eigen::AngleAxisd(0.004, Eigen::Vector3d::UnitX()).toRotationMatrix() * claimed.linear();
+    g.recorded_camera_to_world = claimed;
+    hotgauge::test::TempDir tmp;
+    ASSERT_TRUE(calib::write_calibration(c, tmp.path / "c.yaml").ok());
+    auto back = calib::read_calibration(tmp.path / "c.yaml");
+    ASSERT_TRUE(back.ok()) << back.error().message;
+    ASSERT_TRUE(back->faces[0].recorded_camera_to_world);
+    EXPECT_TRUE(
+        back->faces[0].recorded_camera_to_world->matrix().isApprox(claimed.matrix(), 1e-15));
+    EXPECT_FALSE(back->faces[1].recorded_camera_to_world);
+
+    auto applied = [&](const Eigen::Isometry3d& face_yaml) {
+        hotgauge::core::Recording rec;
+        hotgauge::core::FaceScan f;
+        f.name = g.name;
+        f.T_world_camera = face_yaml;
+        rec.faces.push_back(f);
+        f.name = c.faces[1].name;
+        rec.faces.push_back(f);
+        EXPECT_TRUE(calib::apply_geometry(*back, "c.yaml", rec).ok());
+        return rec.faces[0].T_world_camera;
+    };
+    EXPECT_TRUE(applied(claimed).isApprox(g.T_world_camera, 1e-12));
+    EXPECT_TRUE(applied(g.T_world_camera).isApprox(g.T_world_camera, 1e-12));
+    // The head 58.8 mm further along the scan and 1.1 mm nearer: the correction follows it.
+    Eigen::Isometry3d moved = claimed;
+    moved.pretranslate(Eigen::Vector3d(1.1, 58.8, 0.0));
+    const Eigen::Isometry3d want = moved * claimed.inverse() * g.T_world_camera;
+    EXPECT_TRUE(applied(moved).isApprox(want, 1e-12));
+    EXPECT_GT((want.translation() - g.T_world_camera.translation()).norm(), 58.0);
+}

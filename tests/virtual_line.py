@@ -793,7 +793,8 @@ def commission(bin_dir, workdir, seed):
     still, running = os.path.join(d, "artifact-still"), os.path.join(d, "artifact-running")
     hotgauge(bin_dir, *common, "--in-force", NOMINAL, "--no-vibration", "--out", still)
     print(hotgauge(bin_dir, "calibrate", "faces", "--artifact", ARTIFACT, still,
-                   "--calibration", NOMINAL, "--out", faces), end="")
+                   "--calibration", NOMINAL, "--out", faces, "--report", d), end="")
+    print(f"commissioning report {os.path.join(d, 'commissioning.html')}")
     hotgauge(bin_dir, *common, "--in-force", faces, "--out", running)
     print(hotgauge(bin_dir, "calibrate", "clock", "--artifact", ARTIFACT, running,
                    "--calibration", faces, "--out", cal), end="")

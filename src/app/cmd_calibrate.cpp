@@ -11,6 +11,7 @@
 //   virtual-truth  a seeded true geometry for the virtual cell, off nominal as a real cell is.
 #include <spdlog/spdlog.h>
 
+#include <filesystem>
 #include <memory>
 
 #include "commands.hpp"
@@ -20,8 +21,11 @@
 #include "hotgauge/calib/clock.hpp"
 #include "hotgauge/calib/hand_eye.hpp"
 #include "hotgauge/calib/sensor.hpp"
+#include "hotgauge/calib/sensor_stage.hpp"
 #include "hotgauge/core/clock.hpp"
 #include "hotgauge/io/recording_io.hpp"
+#include "hotgauge/io/yaml_writer.hpp"
+#include "hotgauge/report/commissioning.hpp"
 #include "hotgauge/sim/geometry.hpp"
 #include "hotgauge/sim/simulator.hpp"
 
@@ -33,12 +37,27 @@ struct CalibrateArgs {
     std::string out;
     std::string artifact, recording;
     std::string calibration = HOTGAUGE_CONFIG_DIR "/calibration.yaml";  // in force
+    std::string report;  // calibrate faces --report DIR
+    std::string stage;   // calibrate sensor --stage STAGE.yaml
     std::uint64_t seed = 1;
 };
 
 int fail(const core::Error& e) {
     spdlog::error("{}", e.message);
     return 1;
+}
+
+// DIR/commissioning.html, accepted or refused.
+core::Result<void> write_commissioning_report(const calib::Commissioning& c,
+                                              const CalibrateArgs& a) {
+    std::error_code ec;
+    std::filesystem::create_directories(a.report, ec);
+    if (ec) return core::make_error(a.report + ": cannot create the folder: " + ec.message());
+    const std::string file = a.report + "/commissioning.html";
+    if (auto w = io::write_text(file, report::commissioning_html(c, a.recording, a.artifact)); !w)
+        return w;
+    spdlog::info("commissioning report {}", file);
+    return {};
 }
 
 int run_faces(const CalibrateArgs& a) {
@@ -48,21 +67,37 @@ int run_faces(const CalibrateArgs& a) {
     if (!base) return fail(base.error());
     auto rec = io::read_recording(a.recording);
     if (!rec) return fail(rec.error());
-    auto c = calib::calibrate_faces(*artifact, *rec, *base);
-    if (!c) {
-        spdlog::error("calibration refused, {} stays in force: {}", a.calibration,
-                      c.error().message);
+    calib::Commissioning result = calib::commission_faces(*artifact, *rec, *base);
+    if (!a.report.empty())
+        if (auto w = write_commissioning_report(result, a); !w) return fail(w.error());
+    if (!result.calibration) {
+        spdlog::error("calibration refused, {} stays in force: {}", a.calibration, result.refused);
         return 1;
     }
+    calib::Calibration* c = &*result.calibration;
     c->source = a.artifact + " scanned in " + a.recording;
     if (auto w = calib::write_calibration(*c, a.out); !w) return fail(w.error());
-    for (const auto& f : c->faces)
-        std::printf("%-8s rms %.4f mm, %g spheres, travel scale %.6f\n", f.name.c_str(),
-                    c->residuals.at(f.name + ".rms_mm"), c->residuals.at(f.name + ".spheres"),
-                    f.travel_scale);
-    std::printf("accelerometer: gravity residual %.5f m/s², bias [%.4f, %.4f, %.4f] m/s²\n",
-                c->residuals.at("accel.gravity_rms_mps2"), c->accel_bias_mps2.x(),
-                c->accel_bias_mps2.y(), c->accel_bias_mps2.z());
+    std::printf("%-8s %8s %7s %8s %-23s %-26s %10s %9s\n", "face", "rms mm", "spheres", "moved mm",
+                "σ position x y z mm", "σ rotation x y z °", "travel", "σ ppm");
+    for (const auto& f : c->faces) {
+        auto r = [&](const std::string& key) { return c->residuals.at(f.name + "." + key); };
+        std::printf("%-8s %8.4f %7g %8.3f %.4f %.4f %.4f   %.5f %.5f %.5f %10.6f %9.1f\n",
+                    f.name.c_str(), r("rms_mm"), r("spheres"), r("start_error_mm"),
+                    r("sigma_position_x_mm"), r("sigma_position_y_mm"), r("sigma_position_z_mm"),
+                    r("sigma_rotation_x_deg"), r("sigma_rotation_y_deg"), r("sigma_rotation_z_deg"),
+                    f.travel_scale, r("sigma_travel_ppm"));
+    }
+    if (c->residuals.at("accel.mount_measured") > 0.0)
+        std::printf("accelerometer: gravity residual %.5f m/s², bias [%.4f, %.4f, %.4f] m/s²\n",
+                    c->residuals.at("accel.gravity_rms_mps2"), c->accel_bias_mps2.x(),
+                    c->accel_bias_mps2.y(), c->accel_bias_mps2.z());
+    else
+        std::printf(
+            "accelerometer: mount NOT MEASURED, the recorded mounts are kept: the faces' "
+            "gravity readings leave %.4f m/s² that one head with one bias cannot explain "
+            "(limit %.4f; an accelerometer per face?)\n",
+            c->residuals.at("accel.gravity_rms_mps2"),
+            calib::AlignLimits{}.max_gravity_residual_mps2);
     std::printf("calibration %s\n", a.out.c_str());
     return 0;
 }
@@ -120,10 +155,50 @@ int run_hand_eye(const CalibrateArgs& a) {
 
 // The head's camera and laser plane from checkerboard views into the calibration in force's
 // sensor (method `sensor`: the faces are to be aligned again, in the new sensor's frame).
+// calibrate sensor --stage: the pixel → mm map from a plate on a precision stage.
+int run_sensor_stage(const CalibrateArgs& a, const calib::Calibration& base) {
+    auto readings = calib::read_sensor_stage(a.stage);
+    if (!readings) return fail(readings.error());
+    auto fit = calib::calibrate_sensor_stage(*readings);
+    if (!fit) {
+        spdlog::error("sensor calibration refused, {} stays in force: {}", a.calibration,
+                      fit.error().message);
+        return 1;
+    }
+    calib::Calibration c = base;
+    c.sensor = calib::SensorModel{};
+    c.sensor.model = "stage";
+    c.sensor.width = fit->model.width_px;
+    c.sensor.map = fit->model;
+    c.method = "sensor";
+    c.source = a.stage;
+    c.calibrated_at = core::iso8601_utc(core::realtime_ns());
+    c.residuals = {{"sensor.stage_readings", static_cast<double>(fit->readings)},
+                   {"sensor.stage_points", static_cast<double>(fit->samples)},
+                   {"sensor.stage_z_rms_mm", fit->rms_z_mm},
+                   {"sensor.stage_x_rms_mm", fit->rms_x_mm}};
+    if (auto w = calib::write_calibration(c, a.out); !w) return fail(w.error());
+    std::printf(
+        "%d stage readings, %d stripe points: the map's residual z %.2f µm, x %.2f µm RMS\n"
+        "%s: sensor calibrated; align the faces again (calibrate faces), the profiles' "
+        "frame is the stage's\n",
+        fit->readings, fit->samples, fit->rms_z_mm * 1e3, fit->rms_x_mm * 1e3, a.out.c_str());
+    return 0;
+}
+
 int run_sensor(const CalibrateArgs& a) {
     constexpr double kMaxReprojectionPx = 0.3;
     auto base = calib::read_calibration(a.calibration);
     if (!base) return fail(base.error());
+    if (!a.stage.empty()) {
+        if (!a.recording.empty())
+            return fail(core::make_error("calibrate sensor: a views file or --stage, not both"));
+        return run_sensor_stage(a, *base);
+    }
+    if (a.recording.empty())
+        return fail(
+            core::make_error("calibrate sensor: a views file (image mode) or --stage "
+                             "STAGE.yaml (a plate on a stage)"));
     auto views = calib::read_sensor_views(a.recording);
     if (!views) return fail(views.error());
     auto cal = calib::calibrate_sensor(views->views, views->board);
@@ -207,6 +282,9 @@ Command add_calibrate(CLI::App& app) {
                      "the calibration in force (sensor model, clock offset)")
         ->capture_default_str();
     faces->add_option("--out,-o", a->out, "calibration file to write")->required();
+    faces->add_option("--report", a->report,
+                      "write DIR/commissioning.html: per face the balls, σ, residual map, "
+                      "before/after (also when refused)");
     auto* clock = s->add_subcommand(
         "clock", "the camera → accelerometer clock offset from the artifact under press vibration");
     clock->add_option("--artifact", a->artifact, "artifact file (its spheres and planes)")
@@ -221,8 +299,13 @@ Command add_calibrate(CLI::App& app) {
     hand_eye->add_option("poses", a->recording, "poses file (hotgauge-hand-eye-poses-1)")
         ->required();
     auto* sensor = s->add_subcommand(
-        "sensor", "the head's camera and laser plane from checkerboard views (image mode)");
-    sensor->add_option("views", a->recording, "views file (hotgauge-sensor-views-1)")->required();
+        "sensor",
+        "the head's pixel → mm map: from a plate on a precision stage (--stage), or its camera and "
+        "laser plane from checkerboard views (image mode)");
+    sensor->add_option("views", a->recording, "views file (hotgauge-sensor-views-1)");
+    sensor->add_option("--stage", a->stage,
+                       "stage file (hotgauge-sensor-stage-1): laser images of a flat plate at "
+                       "known heights and tilts");
     sensor->add_option("--calibration", a->calibration, "the calibration in force")
         ->capture_default_str();
     sensor->add_option("--out,-o", a->out, "calibration file to write")->required();

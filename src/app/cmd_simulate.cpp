@@ -51,6 +51,7 @@ struct SimulateArgs {
     bool multipart = false;
     std::string pyrometer_device;      // "" = no pyrometer
     int sensor_views = 0;              // > 0: the head's checkerboard views instead of a part
+    bool sensor_stage = false;         // the head's stage readings instead of a part
     std::uint64_t master_seed = 1000;  // serve: the cold master's seed (--master-part)
     std::string replay;                // serve: replay this recording (docs/virtual-cell.md)
     std::string calibration;           // replay: the receiving daemon's calibration
@@ -119,6 +120,20 @@ core::Result<vcell::ReplayConfig> load_replay(const SimulateArgs& a) {
     return r;
 }
 
+// The cell's nominal calibration with the virtual head's true camera and laser plane as its
+// sensor: what a sensor calibration is judged against (OUT/sensor-truth.yaml).
+calib::Calibration head_truth(const SimulateArgs& a, const sim::CellConfig& cell,
+                              const sim::VirtualSensorCamera& head) {
+    calib::Calibration truth =
+        sim::nominal_calibration(cell, a.cell, core::iso8601_utc(core::realtime_ns()));
+    truth.method = "virtual-truth";
+    truth.sensor.model = "pinhole";
+    truth.sensor.width = head.camera.width;
+    truth.sensor.camera = head.camera;
+    truth.sensor.plane = head.plane;
+    return truth;
+}
+
 // The virtual head's checkerboard views for `calibrate sensor` (docs/calibration.md "Sensor"):
 // OUT/views.yaml with its images, and OUT/sensor-truth.yaml, the cell's nominal calibration
 // with the head's true camera and laser plane as its sensor.
@@ -134,13 +149,7 @@ int write_sensor_views(const SimulateArgs& a, const sim::CellConfig& cell) {
     for (const auto& T : sim::target_poses(head, views.board, a.sensor_views, a.opt.seed))
         views.views.push_back(
             {render.board(views.board, T, rng), render.laser(views.board, T, head.plane, rng)});
-    calib::Calibration truth =
-        sim::nominal_calibration(cell, a.cell, core::iso8601_utc(core::realtime_ns()));
-    truth.method = "virtual-truth";
-    truth.sensor.model = "pinhole";
-    truth.sensor.width = head.camera.width;
-    truth.sensor.camera = head.camera;
-    truth.sensor.plane = head.plane;
+    const calib::Calibration truth = head_truth(a, cell, head);
     const std::filesystem::path out(a.out);
     auto w = calib::write_sensor_views(views, out);
     if (w) w = calib::write_calibration(truth, out / "sensor-truth.yaml");
@@ -150,6 +159,29 @@ int write_sensor_views(const SimulateArgs& a, const sim::CellConfig& cell) {
     }
     std::printf("%zu views %s\ntrue sensor %s\n", views.views.size(), (out / "views.yaml").c_str(),
                 (out / "sensor-truth.yaml").c_str());
+    return 0;
+}
+
+// The virtual head's stage readings for `calibrate sensor --stage` (docs/calibration.md "Sensor
+// on a stage"): OUT/stage.yaml with its images, and OUT/sensor-truth.yaml as for the views.
+int write_sensor_stage(const SimulateArgs& a, const sim::CellConfig& cell) {
+    if (a.out.empty()) {
+        spdlog::error("simulate --sensor-stage: --out DIR is required");
+        return 1;
+    }
+    const sim::VirtualSensorCamera head = sim::design_sensor_camera(cell.sensor);
+    const auto readings =
+        sim::stage_readings(head, sim::default_stage_plan(cell.sensor), a.opt.seed);
+    const calib::Calibration truth = head_truth(a, cell, head);
+    const std::filesystem::path out(a.out);
+    auto w = calib::write_sensor_stage(readings, out);
+    if (w) w = calib::write_calibration(truth, out / "sensor-truth.yaml");
+    if (!w) {
+        spdlog::error("{}", w.error().message);
+        return 1;
+    }
+    std::printf("%zu stage readings %s\ntrue sensor %s\n", readings.size(),
+                (out / "stage.yaml").c_str(), (out / "sensor-truth.yaml").c_str());
     return 0;
 }
 
@@ -273,6 +305,7 @@ int run(const SimulateArgs& a) {
         *cell = std::move(*moved);
     }
     if (a.sensor_views > 0) return write_sensor_views(a, *cell);
+    if (a.sensor_stage) return write_sensor_stage(a, *cell);
     sim::CellConfig c = a.quick ? sim::quick(*cell) : *cell;
     if (a.no_vibration) c.vibration.enabled = false;
     for (auto& m : c.vibration.modes) m.amplitude_mm *= a.vibration_scale;
@@ -374,6 +407,9 @@ Command add_simulate(CLI::App& app) {
                   "scan this calibration artifact (docs/calibration.md) instead of a part");
     s->add_option("--sensor-views", a->sensor_views,
                   "render N checkerboard views of the head for `calibrate sensor` into OUT");
+    s->add_flag("--sensor-stage", a->sensor_stage,
+                "render the head's readings of a plate on a precision stage for `calibrate "
+                "sensor --stage` into OUT");
     s->add_option("--true-calibration", a->true_calibration,
                   "the cell's true geometry, a calibration.yaml (default: the cell config's)");
     s->add_option("--in-force", a->in_force,

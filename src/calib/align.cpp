@@ -1,122 +1,189 @@
 #include "hotgauge/calib/align.hpp"
 
-#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
+#include "align_steps.hpp"
 #include "hotgauge/core/clock.hpp"
 
 namespace hotgauge::calib {
 namespace {
 
 constexpr double kG = 9.81;  // m/s², recording-format-v1's g_up
+constexpr double kRadToDeg = 180.0 / M_PI;
 
-// A profile point: camera point (x, 0, z) and the commanded travel of its profile.
-struct ScanPoint {
-    Eigen::Vector3d q;
-    double c;
-};
+using detail::Matrix9;
 
-// The nine unknowns of a face: camera pose at position 0 and travel vector per commanded mm.
-struct FacePose {
-    Eigen::Matrix3d R;
-    Eigen::Vector3d t, v;
-    Eigen::Vector3d world(const ScanPoint& p) const { return R * p.q + t + p.c * v; }
-};
+// The nine unknowns in words, in the order of `readable` below.
+const char* const kUnknown[9] = {"rotation about the camera's x",
+                                 "rotation about the camera's y",
+                                 "rotation about the camera's z",
+                                 "position along the camera's x",
+                                 "position along the camera's y",
+                                 "position along the camera's z",
+                                 "travel scale",
+                                 "scan direction's tilt toward the camera's x",
+                                 "scan direction's tilt toward the camera's z"};
 
-std::vector<ScanPoint> scan_points(const core::FaceScan& f) {
-    std::vector<ScanPoint> pts;
-    for (std::int64_t k = 0; k < f.n_profiles(); ++k) {
-        const double c = f.profile_positions_mm[k] / f.travel_scale;
-        for (std::int64_t i = 0; i < f.width; ++i) {
-            const float x = f.x(k, i), z = f.z(k, i);
-            if (std::isfinite(x) && std::isfinite(z)) pts.push_back({{x, 0.0, z}, c});
-        }
-    }
-    return pts;
+// Rows: the unknowns in words (camera axes; travel along, and across toward camera x and z) per
+// tangent unknown (rotation vector and position in world axes, travel vector).
+Matrix9 readable(const detail::FacePose& pose) {
+    const Eigen::Matrix3d R = pose.R.toRotationMatrix();
+    const Eigen::Vector3d s = pose.v.normalized();
+    const Eigen::Vector3d ex = (R.col(0) - R.col(0).dot(s) * s).normalized();
+    Matrix9 T = Matrix9::Zero();
+    T.block<3, 3>(0, 0) = R.transpose();
+    T.block<3, 3>(3, 3) = R.transpose();
+    T.block<1, 3>(6, 6) = s.transpose();
+    T.block<1, 3>(7, 6) = ex.transpose();
+    T.block<1, 3>(8, 6) = s.cross(ex).transpose();
+    return T;
 }
 
-struct Assignment {
-    std::vector<int> surface;  // per point: surface index, −1 = none
-    std::vector<int> counts;   // per surface
-    double rms_mm = 0.0;
-};
-
-Assignment assign(const Artifact& a, const std::vector<ScanPoint>& pts, const FacePose& pose,
-                  double gate_mm) {
-    const std::size_t n_surf = surface_count(a);
-    Assignment out;
-    out.surface.assign(pts.size(), -1);
-    out.counts.assign(n_surf, 0);
-    double sum2 = 0.0;
-    std::size_t used = 0;
-    Eigen::Vector3d n;
-    for (std::size_t i = 0; i < pts.size(); ++i) {
-        const Eigen::Vector3d p = pose.world(pts[i]);
-        double best = gate_mm;
-        for (std::size_t j = 0; j < n_surf; ++j) {
-            const double d = std::abs(surface_distance(a, j, p, n));
-            if (d < best) {
-                best = d;
-                out.surface[i] = static_cast<int>(j);
-            }
-        }
-        if (out.surface[i] < 0) continue;
-        ++out.counts[out.surface[i]];
-        sum2 += best * best;
-        ++used;
-    }
-    out.rms_mm = used ? std::sqrt(sum2 / static_cast<double>(used)) : 0.0;
-    return out;
+// Each readable unknown's limit in its tangent unit (rad, mm, mm/mm).
+Eigen::Matrix<double, 9, 1> limits_vector(const AlignLimits& lim) {
+    Eigen::Matrix<double, 9, 1> d;
+    const double rot = lim.max_sigma_rotation_deg / kRadToDeg;
+    d << rot, rot, rot, lim.max_sigma_position_mm, lim.max_sigma_position_mm,
+        lim.max_sigma_position_mm, lim.max_sigma_travel_ppm * 1e-6,
+        lim.max_sigma_direction_deg / kRadToDeg, lim.max_sigma_direction_deg / kRadToDeg;
+    return d;
 }
 
-// "S1 (812 points), support (20311 points)" or "no artifact surface".
-std::string seen_surfaces(const Artifact& a, const Assignment& as) {
+// The weak direction in the face's unknowns ("position along the camera's x (97 %) with …"),
+// each measured against its limit.
+std::string unknowns_in_words(const Eigen::Matrix<double, 9, 1>& e, bool& travel) {
+    std::vector<int> order(9);
+    for (int i = 0; i < 9; ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](int a, int b) { return e(a) * e(a) > e(b) * e(b); });
+    std::string words;
+    for (int k = 0; k < 3 && (k == 0 || e(order[k]) * e(order[k]) >= 0.1); ++k) {
+        const int percent = static_cast<int>(std::lround(100 * e(order[k]) * e(order[k])));
+        words +=
+            std::string(k ? ", " : "") + kUnknown[order[k]] + " " + std::to_string(percent) + " %";
+        travel |= order[k] >= 6;
+    }
+    return words;
+}
+
+// The least well fixed combination of unknowns (each against its limit), in words a person can
+// act on. When it moves the scene mostly by turning it about a line near the balls (three balls
+// in a row), that line is named: world coordinates, mm.
+std::string weak_direction(const Matrix9& information, const detail::FacePose& pose,
+                           const Eigen::Vector3d& scene_mm, const AlignLimits& lim) {
+    const Matrix9 T = readable(pose);
+    const Eigen::Matrix<double, 9, 1> d = limits_vector(lim);
+    const Matrix9 Hn = d.asDiagonal() * (T * information * T.transpose()) * d.asDiagonal();
+    const Eigen::SelfAdjointEigenSolver<Matrix9> eig(Hn);
+    const Eigen::Matrix<double, 9, 1> e = eig.eigenvectors().col(0);
+    bool travel = false;
+    const std::string words = unknowns_in_words(e, travel);
+    // The same motion in world units: a point x moves by ω × (x − t) + δt.
+    const Eigen::Matrix<double, 9, 1> delta = T.transpose() * (d.asDiagonal() * e);
+    const Eigen::Vector3d w = delta.head<3>();
+    const Eigen::Vector3d at_scene = w.cross(scene_mm - pose.t) + delta.segment<3>(3);
+    constexpr double kSceneMm = 100.0;  // the size of an artifact
+    char line[160] = "";
+    const bool turns = w.norm() * kSceneMm > at_scene.norm();
+    if (turns) {
+        const Eigen::Vector3d axis = w.normalized();
+        const Eigen::Vector3d p = scene_mm + w.cross(at_scene) / w.squaredNorm();
+        std::snprintf(line, sizeof line,
+                      "a turn about the line along (%.2f, %.2f, %.2f) through (%.1f, %.1f, %.1f) "
+                      "mm",
+                      axis.x(), axis.y(), axis.z(), p.x(), p.y(), p.z());
+    }
+    std::string advice = turns ? "the balls it sees lie near that line: add balls away from it "
+                                 "(other heights, other places across the view)"
+                               : "more balls in this face's view, or larger ones";
+    if (travel) advice += ", spread along the scan";
+    return "the weak direction is " +
+           (turns ? line + (" (in the face's unknowns: " + words + ")") : words) + ": " + advice;
+}
+
+PoseSigma pose_sigma(const Matrix9& C, const detail::FacePose& pose) {
+    const Matrix9 T = readable(pose);
+    const Matrix9 Cr = T * C * T.transpose();
+    PoseSigma s;
+    for (int k = 0; k < 3; ++k) {
+        s.position_mm(k) = std::sqrt(C(3 + k, 3 + k));  // world axes
+        s.rotation_deg(k) = std::sqrt(Cr(k, k)) * kRadToDeg;
+    }
+    s.travel_scale_ppm = std::sqrt(Cr(6, 6)) / pose.v.norm() * 1e6;
+    s.direction_deg = std::sqrt(std::max(Cr(7, 7), Cr(8, 8))) / pose.v.norm() * kRadToDeg;
+    return s;
+}
+
+// The first σ over its limit, in words ("σ of the camera position along world y is 0.0071 mm
+// (limit 0.005 mm)"), or empty.
+std::string sigma_over_limit(const PoseSigma& s, const AlignLimits& lim) {
+    const char* axis[3] = {"x", "y", "z"};
+    char buf[160];
+    for (int k = 0; k < 3; ++k) {
+        if (s.position_mm(k) > lim.max_sigma_position_mm) {
+            std::snprintf(buf, sizeof buf,
+                          "σ of the camera position along world %s is %.4f mm (limit %.4f mm)",
+                          axis[k], s.position_mm(k), lim.max_sigma_position_mm);
+            return buf;
+        }
+        if (s.rotation_deg(k) > lim.max_sigma_rotation_deg) {
+            std::snprintf(buf, sizeof buf,
+                          "σ of the rotation about the camera's %s is %.5f° (limit %.5f°)", axis[k],
+                          s.rotation_deg(k), lim.max_sigma_rotation_deg);
+            return buf;
+        }
+    }
+    if (s.travel_scale_ppm > lim.max_sigma_travel_ppm) {
+        std::snprintf(buf, sizeof buf, "σ of the travel scale is %.1f ppm (limit %.1f ppm)",
+                      s.travel_scale_ppm, lim.max_sigma_travel_ppm);
+        return buf;
+    }
+    if (s.direction_deg > lim.max_sigma_direction_deg) {
+        std::snprintf(buf, sizeof buf, "σ of the scan direction is %.5f° (limit %.5f°)",
+                      s.direction_deg, lim.max_sigma_direction_deg);
+        return buf;
+    }
+    return {};
+}
+
+// "0.0372": a figure with `digits` decimals.
+std::string fixed(double v, int digits) {
+    char buf[48];
+    std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+    return buf;
+}
+
+std::string ball_names(const Artifact& a, const std::vector<detail::BallSeen>& balls) {
     std::string out;
-    for (std::size_t j = 0; j < as.counts.size(); ++j) {
-        if (as.counts[j] == 0) continue;
-        const std::string& name = surface_name(a, j);
-        out += (out.empty() ? "" : ", ") + name + " (" + std::to_string(as.counts[j]) + " points)";
-    }
-    return out.empty() ? "no artifact surface" : out;
+    for (const auto& b : balls) out += (out.empty() ? "" : ", ") + a.spheres[b.sphere].name;
+    return out.empty() ? "none" : out;
 }
 
-Eigen::Matrix3d exp_so3(const Eigen::Vector3d& w) {
-    const double a = w.norm();
-    if (a < 1e-15) return Eigen::Matrix3d::Identity();
-    return Eigen::AngleAxisd(a, w / a).toRotationMatrix();
+// How far the recording's geometry put the balls from where the fit puts them, worst.
+double start_error(const std::vector<detail::BallSeen>& balls, const detail::FacePose& recorded,
+                   const detail::FacePose& fitted) {
+    double worst = 0.0;
+    for (const auto& b : balls) {
+        const detail::ScanPoint p{{b.u.x(), 0.0, b.u.z()}, b.u.y()};
+        worst = std::max(worst, (recorded.world(p) - fitted.world(p)).norm());
+    }
+    return worst;
 }
 
-// One Gauss–Newton step on the assigned points; returns the step (ω, δt, δv) or an error when
-// the assigned surfaces do not fix the nine unknowns.
-core::Result<Eigen::Matrix<double, 9, 1>> gauss_newton_step(const Artifact& a,
-                                                            const std::vector<ScanPoint>& pts,
-                                                            const Assignment& as, FacePose& pose) {
-    using Vec9 = Eigen::Matrix<double, 9, 1>;
-    Eigen::Matrix<double, 9, 9> H = Eigen::Matrix<double, 9, 9>::Zero();
-    Vec9 g = Vec9::Zero();
-    Eigen::Vector3d n;
-    for (std::size_t i = 0; i < pts.size(); ++i) {
-        if (as.surface[i] < 0) continue;
-        const Eigen::Vector3d Rq = pose.R * pts[i].q;
-        const double r =
-            surface_distance(a, static_cast<std::size_t>(as.surface[i]), pose.world(pts[i]), n);
-        Vec9 J;
-        J << Rq.cross(n), n, pts[i].c * n;  // d/dω of R ← exp(ω)·R, d/dt, d/dv
-        H.selfadjointView<Eigen::Lower>().rankUpdate(J);
-        g += J * r;
-    }
-    H = H.selfadjointView<Eigen::Lower>();
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 9, 9>> eig(H);
-    if (!(eig.eigenvalues()(0) > 1e-9 * eig.eigenvalues()(8)))
-        return core::make_error("the surfaces it sees do not fix its pose and travel");
-    const Vec9 step = -H.ldlt().solve(g);
-    pose.R = exp_so3(step.head<3>()) * pose.R;
-    pose.t += step.segment<3>(3);
-    pose.v += step.tail<3>();
-    return step;
+FaceGeometry geometry_of(const core::FaceScan& f, const detail::FacePose& pose) {
+    FaceGeometry g;
+    g.name = f.name;
+    g.T_world_camera = Eigen::Isometry3d::Identity();
+    g.T_world_camera.linear() = pose.R.toRotationMatrix();
+    g.T_world_camera.translation() = pose.t;
+    g.travel_scale = pose.v.norm();
+    g.scan_direction = pose.v / g.travel_scale;
+    g.R_camera_accel = f.R_camera_accel;
+    g.recorded_camera_to_world = f.T_world_camera;
+    return g;
 }
 
 }  // namespace
@@ -124,54 +191,55 @@ core::Result<Eigen::Matrix<double, 9, 1>> gauss_newton_step(const Artifact& a,
 core::Result<FaceAlignment> align_face(const Artifact& a, const core::FaceScan& f,
                                        const AlignLimits& lim) {
     const std::string w = "face " + f.name + ": ";
-    const std::vector<ScanPoint> pts = scan_points(f);
-    FacePose pose{f.T_world_camera.linear(), f.T_world_camera.translation(),
-                  f.travel_scale * f.scan_direction};
-    FaceAlignment out;
-    double gate = lim.max_start_error_mm;
-    Assignment as;
-    for (out.iterations = 1; out.iterations <= 60; ++out.iterations) {
-        as = assign(a, pts, pose, gate);
-        auto step = gauss_newton_step(a, pts, as, pose);
-        if (!step)
-            return core::make_error(w + "sees " + seen_surfaces(a, as) + ": " +
-                                    step.error().message + " (needs 3 spheres)");
-        const double floor_mm = 5.0 * 0.05;  // 5σ of a good sensor; the gate never goes below
-        const bool settled = gate <= floor_mm * 1.0001 || gate <= 4.0 * as.rms_mm * 1.0001;
-        if (settled && step->head<3>().norm() < 1e-9 && step->tail<6>().norm() < 1e-6) break;
-        gate = std::min(gate, std::max(floor_mm, 4.0 * as.rms_mm));
-    }
-    if (out.iterations > 60)
-        return core::make_error(w + "the fit did not settle in 60 iterations (residual RMS " +
-                                std::to_string(as.rms_mm) + " mm)");
-    as = assign(a, pts, pose, gate);
-    out.rms_mm = as.rms_mm;
-    for (std::size_t j = 0; j < as.counts.size(); ++j) {
-        const bool sphere = j < a.spheres.size();
-        const std::string& name = surface_name(a, j);
-        out.points[name] = as.counts[j];
-        if (sphere && as.counts[j] >= lim.min_points_per_sphere) out.spheres.push_back(name);
-    }
-    if (static_cast<int>(out.spheres.size()) < lim.min_spheres) {
-        std::string seen;
-        for (const auto& s : out.spheres) seen += (seen.empty() ? "" : ", ") + s;
-        return core::make_error(w + "sees " + std::to_string(out.spheres.size()) + " sphere(s) (" +
-                                (seen.empty() ? "none" : seen) + ") with at least " +
-                                std::to_string(lim.min_points_per_sphere) + " points; needs " +
+    const std::vector<detail::ScanPoint> pts = detail::scan_points(f);
+    const detail::FacePose recorded{Eigen::Quaterniond(f.T_world_camera.linear()),
+                                    f.T_world_camera.translation(),
+                                    f.travel_scale * f.scan_direction};
+    std::vector<detail::BallSeen> balls = detail::find_balls(a, pts, recorded, lim);
+    if (static_cast<int>(balls.size()) < lim.min_spheres)
+        return core::make_error(w + "sees " + std::to_string(balls.size()) + " ball(s) (" +
+                                ball_names(a, balls) + ") with at least " +
+                                std::to_string(lim.min_points_per_sphere) + " points within " +
+                                fixed(lim.max_start_error_mm, 1) +
+                                " mm of where the recording's geometry puts them; needs " +
                                 std::to_string(lim.min_spheres));
+    auto placed = detail::place_from_balls(a, balls, recorded);
+    if (!placed) return core::make_error(w + placed.error().message);
+    auto fit = detail::fit_points(a, pts, *placed);
+    if (!fit) return core::make_error(w + fit.error().message);
+    Eigen::Vector3d scene = Eigen::Vector3d::Zero();
+    for (const auto& b : balls) scene += a.spheres[b.sphere].center_mm / double(balls.size());
+    FaceAlignment out;
+    out.rms_mm = fit->rms_mm;
+    out.iterations = fit->iterations;
+    out.start_error_mm = start_error(balls, recorded, fit->pose);
+    out.map = fit->map;
+    for (std::size_t j = 0; j < fit->counts.size(); ++j) {
+        if (fit->counts[j] > 0)
+            out.surfaces.push_back(
+                {surface_name(a, j), fit->counts[j], fit->rms_surface_mm[j], fit->mean_mm[j]});
+        out.points[surface_name(a, j)] = fit->counts[j];
+        if (j < a.spheres.size() && fit->counts[j] >= lim.min_points_per_sphere)
+            out.spheres.push_back(a.spheres[j].name);
     }
+    if (out.start_error_mm > lim.max_start_error_mm)
+        return core::make_error(w + "the recording's geometry put the balls " +
+                                fixed(out.start_error_mm, 1) + " mm from where they are (limit " +
+                                fixed(lim.max_start_error_mm, 1) +
+                                " mm): another artifact's certificate, or the wrong cell");
     if (out.rms_mm > lim.max_rms_mm)
-        return core::make_error(w + "residual RMS " + std::to_string(out.rms_mm) +
-                                " mm exceeds the limit of " + std::to_string(lim.max_rms_mm) +
+        return core::make_error(w + "residual RMS " + fixed(out.rms_mm, 4) +
+                                " mm exceeds the limit of " + fixed(lim.max_rms_mm, 4) +
                                 " mm (wrong artifact, moved during the scan, or a bad start)");
-    FaceGeometry& g = out.geometry;
-    g.name = f.name;
-    g.T_world_camera = Eigen::Isometry3d::Identity();
-    g.T_world_camera.linear() = pose.R;
-    g.T_world_camera.translation() = pose.t;
-    g.travel_scale = pose.v.norm();
-    g.scan_direction = pose.v / g.travel_scale;
-    g.R_camera_accel = f.R_camera_accel;
+    if (!fit->covariance_ok)
+        return core::make_error(w + "the balls it sees (" + ball_names(a, balls) +
+                                ") do not fix its pose and travel; " +
+                                weak_direction(fit->information, fit->pose, scene, lim));
+    out.sigma = pose_sigma(fit->covariance, fit->pose);
+    if (const std::string over = sigma_over_limit(out.sigma, lim); !over.empty())
+        return core::make_error(w + "not fixed well enough: " + over + "; " +
+                                weak_direction(fit->information, fit->pose, scene, lim));
+    out.geometry = geometry_of(f, fit->pose);
     return out;
 }
 
@@ -225,41 +293,89 @@ core::Result<AccelMount> estimate_accel_mount(const core::Recording& rec,
     for (std::size_t j = 0; j < D.size(); ++j)
         sum2 += (G[j] - Q * D[j] - m.bias_mps2).squaredNorm();
     m.residual_mps2 = std::sqrt(sum2 / static_cast<double>(D.size()));
-    if (m.residual_mps2 > lim.max_gravity_residual_mps2)
-        return core::make_error("accelerometer: gravity residual " +
-                                std::to_string(m.residual_mps2) + " m/s² exceeds " +
-                                std::to_string(lim.max_gravity_residual_mps2) + " m/s²");
     return m;
 }
 
-core::Result<Calibration> calibrate_faces(const Artifact& artifact, const core::Recording& rec,
-                                          const Calibration& base, const AlignLimits& lim) {
-    if (rec.recipe != artifact.name)
-        return core::make_error("the recording's recipe is '" + rec.recipe +
-                                "', not the artifact '" + artifact.name + "'");
+namespace {
+
+// The figures of an aligned face, written into calibration.yaml's residuals.
+void write_residuals(const FaceAlignment& fa, const std::string& face,
+                     std::map<std::string, double>& r) {
+    r[face + ".rms_mm"] = fa.rms_mm;
+    r[face + ".spheres"] = static_cast<double>(fa.spheres.size());
+    r[face + ".start_error_mm"] = fa.start_error_mm;
+    for (int k = 0; k < 3; ++k) {
+        const std::string axis(1, "xyz"[k]);
+        r[face + ".sigma_position_" + axis + "_mm"] = fa.sigma.position_mm(k);
+        r[face + ".sigma_rotation_" + axis + "_deg"] = fa.sigma.rotation_deg(k);
+    }
+    r[face + ".sigma_travel_ppm"] = fa.sigma.travel_scale_ppm;
+    r[face + ".sigma_direction_deg"] = fa.sigma.direction_deg;
+}
+
+}  // namespace
+
+Commissioning commission_faces(const Artifact& artifact, const core::Recording& rec,
+                               const Calibration& base, const AlignLimits& lim) {
+    Commissioning out;
+    out.artifact = artifact.name;
+    out.limits = lim;
+    if (rec.recipe != artifact.name) {
+        out.refused = "the recording's recipe is '" + rec.recipe + "', not the artifact '" +
+                      artifact.name + "'";
+        return out;
+    }
     for (const auto& f : base.faces)
-        if (!rec.face(f.name))
-            return core::make_error("face " + f.name +
-                                    " of the calibration in force is not in the artifact "
-                                    "recording: scan every face");
+        if (!rec.face(f.name)) {
+            out.refused = "face " + f.name +
+                          " of the calibration in force is not in the artifact recording: scan "
+                          "every face";
+            return out;
+        }
     Calibration c = base;
     c.method = "artifact";
     c.calibrated_at = core::iso8601_utc(core::realtime_ns());
     c.residuals.clear();
     c.faces.clear();
     for (const auto& f : rec.faces) {
+        FaceOutcome& o = out.faces.emplace_back();
+        o.name = f.name;
+        o.recorded = {f.name,         f.T_world_camera, f.scan_direction,
+                      f.travel_scale, f.R_camera_accel, std::nullopt};
         auto fa = align_face(artifact, f, lim);
-        if (!fa) return fa.error();
-        c.residuals[f.name + ".rms_mm"] = fa->rms_mm;
-        c.residuals[f.name + ".spheres"] = static_cast<double>(fa->spheres.size());
+        if (!fa) {
+            o.refused = fa.error().message;
+            if (out.refused.empty()) out.refused = o.refused;
+            continue;
+        }
+        write_residuals(*fa, f.name, c.residuals);
         c.faces.push_back(fa->geometry);
+        o.aligned = std::move(*fa);
     }
+    if (!out.refused.empty()) return out;
     auto mount = estimate_accel_mount(rec, c.faces, lim);
-    if (!mount) return mount.error();
-    for (auto& f : c.faces) f.R_camera_accel = mount->R_camera_accel;
-    c.accel_bias_mps2 = mount->bias_mps2;
+    if (!mount) {
+        out.refused = mount.error().message;
+        return out;
+    }
     c.residuals["accel.gravity_rms_mps2"] = mount->residual_mps2;
-    return c;
+    // Readings that one head with one bias cannot explain (an accelerometer per face, each with
+    // its own bias, as recording-format-v1 allows) leave the mounts as recorded: not measured.
+    const bool one_head = mount->residual_mps2 <= lim.max_gravity_residual_mps2;
+    c.residuals["accel.mount_measured"] = one_head ? 1.0 : 0.0;
+    if (one_head) {
+        for (auto& f : c.faces) f.R_camera_accel = mount->R_camera_accel;
+        c.accel_bias_mps2 = mount->bias_mps2;
+    }
+    out.calibration = std::move(c);
+    return out;
+}
+
+core::Result<Calibration> calibrate_faces(const Artifact& artifact, const core::Recording& rec,
+                                          const Calibration& base, const AlignLimits& lim) {
+    Commissioning c = commission_faces(artifact, rec, base, lim);
+    if (!c.calibration) return core::make_error(c.refused);
+    return std::move(*c.calibration);
 }
 
 }  // namespace hotgauge::calib

@@ -49,12 +49,50 @@ SensorModel read_pinhole(const YamlReader& y, const YAML::Node& s) {
     return m;
 }
 
+// sensor: {model: stage, width, height, degree, x_degree, u0_px, x_pitch_mm,
+// reference_range_mm, coefficients: [width × (degree + 2)], x_coefficients: [width ×
+// (x_degree + 1)]}: a stage calibration's pixel → mm map (acquire::CalibratedModel).
+SensorModel read_stage_map(const YamlReader& y, const YAML::Node& s) {
+    const std::string w = "sensor";
+    y.expect_map(s, w,
+                 {"model", "width", "height", "degree", "x_degree", "u0_px", "x_pitch_mm",
+                  "reference_range_mm", "coefficients", "x_coefficients"});
+    SensorModel m;
+    m.model = "stage";
+    acquire::CalibratedModel& c = m.map;
+    auto integer = [&](const char* key, int lo, int hi) {
+        const auto v = y.integer(y.require(s, w, key), w + "." + key);
+        if (v < lo || v > hi)
+            y.fail(s[key], w + "." + key + ": must be in [" + std::to_string(lo) + ", " +
+                               std::to_string(hi) + "]");
+        return static_cast<int>(v);
+    };
+    c.width_px = integer("width", 2, 1 << 15);
+    c.height_px = integer("height", 2, 1 << 15);
+    c.degree = integer("degree", 1, 5);
+    c.x_degree = integer("x_degree", 0, 5);
+    m.width = c.width_px;
+    c.u0_px = y.number(y.require(s, w, "u0_px"), w + ".u0_px");
+    c.x_pitch_mm = positive(y, s, w, "x_pitch_mm");
+    c.reference_range_mm = positive(y, s, w, "reference_range_mm");
+    c.coefficients = y.numbers(y.require(s, w, "coefficients"), w + ".coefficients",
+                               static_cast<std::size_t>(c.width_px) * (c.degree + 2));
+    c.x_coefficients =
+        y.numbers(y.require(s, w, "x_coefficients"), w + ".x_coefficients",
+                  c.x_degree > 0 ? static_cast<std::size_t>(c.width_px) * (c.x_degree + 1) : 0);
+    if (auto ok = acquire::Triangulation::calibrated(c); !ok)
+        y.fail(s, w + ": " + ok.error().message);
+    return m;
+}
+
 SensorModel read_sensor(const YamlReader& y, const YAML::Node& s) {
     const std::string w = "sensor";
     const std::string model = y.string(y.require(s, w, "model"), w + ".model");
     if (model == "pinhole") return read_pinhole(y, s);
+    if (model == "stage") return read_stage_map(y, s);
     if (model != "direct_beam")
-        y.fail(s["model"], w + ".model: '" + model + "' is not known (direct_beam, pinhole)");
+        y.fail(s["model"],
+               w + ".model: '" + model + "' is not known (direct_beam, pinhole, stage)");
     y.expect_map(s, w,
                  {"model", "width", "pitch_mm", "standoff_mm", "min_range_mm", "max_range_mm",
                   "baseline_mm"});
@@ -73,7 +111,8 @@ SensorModel read_sensor(const YamlReader& y, const YAML::Node& s) {
 
 FaceGeometry read_face(const YamlReader& y, const YAML::Node& f, const std::string& w) {
     y.expect_map(f, w,
-                 {"name", "camera_to_world", "scan_direction", "travel_scale", "accel_to_camera"});
+                 {"name", "camera_to_world", "scan_direction", "travel_scale", "accel_to_camera",
+                  "recorded_camera_to_world"});
     FaceGeometry g;
     g.name = y.string(y.require(f, w, "name"), w + ".name");
     g.T_world_camera = y.isometry(y.require(f, w, "camera_to_world"), w + ".camera_to_world");
@@ -84,6 +123,8 @@ FaceGeometry read_face(const YamlReader& y, const YAML::Node& f, const std::stri
         y.fail(d, w + ".scan_direction: must be a unit vector");
     g.travel_scale = positive(y, f, w, "travel_scale");
     g.R_camera_accel = y.rotation(y.require(f, w, "accel_to_camera"), w + ".accel_to_camera");
+    if (const YAML::Node r = f["recorded_camera_to_world"])
+        g.recorded_camera_to_world = y.isometry(r, w + ".recorded_camera_to_world");
     return g;
 }
 
@@ -109,6 +150,20 @@ std::string fmt_sensor(const SensorModel& s) {
                ", distortion: " + io::fmt_row(c.distortion.data(), 5) +
                ", plane_normal: " + io::fmt_row(s.plane.normal.data(), 3) +
                ", plane_offset_mm: " + fmt_double(s.plane.offset_mm) + "}";
+    }
+    if (s.model == "stage") {
+        const acquire::CalibratedModel& c = s.map;
+        const auto row = [](const std::vector<double>& v) {
+            return io::fmt_row(v.data(), static_cast<int>(v.size()));
+        };
+        return "{model: stage, width: " + std::to_string(c.width_px) +
+               ", height: " + std::to_string(c.height_px) +
+               ", degree: " + std::to_string(c.degree) +
+               ", x_degree: " + std::to_string(c.x_degree) + ", u0_px: " + fmt_double(c.u0_px) +
+               ", x_pitch_mm: " + fmt_double(c.x_pitch_mm) +
+               ", reference_range_mm: " + fmt_double(c.reference_range_mm) +
+               ",\n         coefficients: " + row(c.coefficients) +
+               ",\n         x_coefficients: " + row(c.x_coefficients) + "}";
     }
     return "{model: direct_beam, width: " + std::to_string(s.width) +
            ", pitch_mm: " + fmt_double(s.pitch_mm) + ", standoff_mm: " + fmt_double(s.standoff_mm) +
@@ -176,14 +231,34 @@ core::Result<void> write_calibration(const Calibration& c, const std::filesystem
     y += "}\nsensor: " + fmt_sensor(c.sensor) + "\n";
     y += "clock_offset_ns: " + std::to_string(c.clock_offset_ns) +
          "\naccel_bias_mps2: " + fmt_row(c.accel_bias_mps2.data(), 3) + "\nfaces:\n";
-    for (const auto& f : c.faces)
+    for (const auto& f : c.faces) {
         y += "  - name: " + quote(f.name) +
              "\n    camera_to_world: " + fmt_matrix(f.T_world_camera.matrix()) +
              "\n    scan_direction: " + fmt_row(f.scan_direction.data(), 3) +
              "\n    travel_scale: " + fmt_double(f.travel_scale) +
              "\n    accel_to_camera: " + fmt_matrix(f.R_camera_accel) + "\n";
+        if (f.recorded_camera_to_world)
+            y += "    recorded_camera_to_world: " +
+                 fmt_matrix(f.recorded_camera_to_world->matrix()) + "\n";
+    }
     return io::write_text(file, y);
 }
+
+namespace {
+
+bool same_pose(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+    return (a.matrix() - b.matrix()).cwiseAbs().maxCoeff() < 1e-9;
+}
+
+// The calibrated pose of a face whose recording says `recorded` (apply_geometry's rule).
+Eigen::Isometry3d pose_for(const FaceGeometry& g, const Eigen::Isometry3d& recorded) {
+    if (!g.recorded_camera_to_world || same_pose(recorded, g.T_world_camera) ||
+        same_pose(recorded, *g.recorded_camera_to_world))
+        return g.T_world_camera;
+    return recorded * g.recorded_camera_to_world->inverse() * g.T_world_camera;
+}
+
+}  // namespace
 
 core::Result<void> apply_geometry(const Calibration& c, const std::string& calibration_file,
                                   core::Recording& recording) {
@@ -193,7 +268,7 @@ core::Result<void> apply_geometry(const Calibration& c, const std::string& calib
                                     "' (the recording has it)");
     for (auto& f : recording.faces) {
         const FaceGeometry& g = *c.face(f.name);
-        f.T_world_camera = g.T_world_camera;
+        f.T_world_camera = pose_for(g, f.T_world_camera);
         f.scan_direction = g.scan_direction;
         f.R_camera_accel = g.R_camera_accel;
         const double rescale = g.travel_scale / f.travel_scale;
@@ -207,6 +282,13 @@ core::Result<void> apply_geometry(const Calibration& c, const std::string& calib
 }
 
 core::Result<acquire::Triangulation> triangulation(const SensorModel& s, int height_px) {
+    if (s.model == "stage") {
+        if (s.map.height_px != height_px)
+            return core::make_error("sensor: the calibration's map has " +
+                                    std::to_string(s.map.height_px) + " rows, the camera " +
+                                    std::to_string(height_px));
+        return acquire::Triangulation::calibrated(s.map);
+    }
     if (s.model == "pinhole") {
         if (s.camera.height != height_px)
             return core::make_error("sensor: the calibration's camera has " +

@@ -1,7 +1,9 @@
-// The sensor calibration's views file and its images (docs/calibration.md "Sensor").
+// The sensor calibration's files and their images: the views file (image mode) and the stage
+// file (docs/calibration.md "Sensor", "Sensor on a stage").
 #include <opencv2/imgcodecs.hpp>
 
 #include "hotgauge/calib/sensor.hpp"
+#include "hotgauge/calib/sensor_stage.hpp"
 #include "hotgauge/io/yaml_reader.hpp"
 #include "hotgauge/io/yaml_writer.hpp"
 
@@ -9,6 +11,7 @@ namespace hotgauge::calib {
 namespace {
 
 constexpr const char* kFormat = "hotgauge-sensor-views-1";
+constexpr const char* kStageFormat = "hotgauge-sensor-stage-1";
 
 // An 8-bit grey PNG (or any format OpenCV reads), empty when it cannot be read.
 GrayImage read_image(const std::filesystem::path& file) {
@@ -24,7 +27,62 @@ GrayImage read_image(const std::filesystem::path& file) {
     return g;
 }
 
+core::Result<void> write_png(const GrayImage& img, const std::filesystem::path& file) {
+    const cv::Mat m(img.height, img.width, CV_8UC1, const_cast<std::uint8_t*>(img.pixels.data()));
+    if (!cv::imwrite(file.string(), m)) return core::make_error(file.string() + ": cannot write");
+    return {};
+}
+
 }  // namespace
+
+core::Result<std::vector<StageReading>> read_sensor_stage(const std::filesystem::path& file) {
+    const io::YamlReader y(file.string());
+    const std::filesystem::path dir = file.parent_path();
+    return y.guarded<std::vector<StageReading>>([&] {
+        const YAML::Node root = y.load();
+        y.expect_map(root, "stage file", {"format", "readings"});
+        const std::string format = y.string(y.require(root, "stage file", "format"), "format");
+        if (format != kStageFormat)
+            y.fail(root["format"], "format: '" + format + "', expected " + kStageFormat);
+        const YAML::Node list = y.require(root, "stage file", "readings");
+        if (!list.IsSequence()) y.fail(list, "readings: expected a list");
+        std::vector<StageReading> out;
+        for (std::size_t i = 0; i < list.size(); ++i) {
+            const std::string w = "readings[" + std::to_string(i) + "]";
+            y.expect_map(list[i], w, {"laser", "height_mm", "tilt_deg"});
+            StageReading r;
+            const std::string name = y.string(y.require(list[i], w, "laser"), w + ".laser");
+            r.laser = read_image(dir / name);
+            if (r.laser.empty())
+                y.fail(list[i]["laser"],
+                       w + ".laser: cannot read '" + name + "' as an 8-bit grey image");
+            if (!out.empty() && (r.laser.width != out.front().laser.width ||
+                                 r.laser.height != out.front().laser.height))
+                y.fail(list[i]["laser"], w + ".laser: '" + name + "' is not the size of the first");
+            r.height_mm = y.number(y.require(list[i], w, "height_mm"), w + ".height_mm");
+            r.tilt_deg = y.number(y.require(list[i], w, "tilt_deg"), w + ".tilt_deg");
+            out.push_back(std::move(r));
+        }
+        return out;
+    });
+}
+
+core::Result<void> write_sensor_stage(const std::vector<StageReading>& readings,
+                                      const std::filesystem::path& dir) {
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) return core::make_error(dir.string() + ": " + ec.message());
+    std::string y = std::string("format: ") + kStageFormat + "\nreadings:\n";
+    for (std::size_t i = 0; i < readings.size(); ++i) {
+        char name[32];
+        std::snprintf(name, sizeof name, "stage%02zu.png", i + 1);
+        if (auto w = write_png(readings[i].laser, dir / name); !w) return w;
+        y += std::string("  - {laser: ") + name +
+             ", height_mm: " + io::fmt_double(readings[i].height_mm) +
+             ", tilt_deg: " + io::fmt_double(readings[i].tilt_deg) + "}\n";
+    }
+    return io::write_text(dir / "stage.yaml", y);
+}
 
 core::Result<SensorViews> read_sensor_views(const std::filesystem::path& file) {
     const io::YamlReader y(file.string());

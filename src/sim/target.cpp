@@ -194,4 +194,42 @@ calib::GrayImage TargetRenderer::laser(const calib::Checkerboard& b, const Eigen
         rng);
 }
 
+StagePlan default_stage_plan(const SensorConfig& sensor) {
+    StagePlan p;
+    // The head's first rows see 625 mm: the stage starts inside what every column images.
+    const double lo = sensor.min_range_mm + 40.0, hi = sensor.max_range_mm - 20.0;
+    for (int i = 0; i < 25; ++i) p.level_mm.push_back(lo + (hi - lo) * i / 24.0);
+    for (int i = 0; i < 7; ++i) p.tilted_mm.push_back(lo + 30.0 + (hi - lo - 60.0) * i / 6.0);
+    return p;
+}
+
+std::vector<calib::StageReading> stage_readings(const VirtualSensorCamera& head,
+                                                const StagePlan& plan, std::uint64_t seed,
+                                                RenderOptions options) {
+    // The plate: 900 × 100 mm, blank (a board whose squares the laser image does not show),
+    // centred on the laser frame's z axis, turned about the laser plane's normal (y).
+    const calib::Checkerboard plate{90, 10, 10.0};
+    const TargetRenderer renderer(head.camera, options);
+    std::mt19937_64 rng(seed);
+    std::vector<calib::StageReading> out;
+    auto take = [&](double height, double tilt_deg) {
+        const double a = tilt_deg * std::numbers::pi / 180.0;
+        Eigen::Isometry3d T_laser_plate = Eigen::Isometry3d::Identity();
+        const Eigen::Vector3d along(std::cos(a), 0.0, std::sin(a)),
+            across = Eigen::Vector3d::UnitY();
+        T_laser_plate.linear() << along, across, along.cross(across);
+        T_laser_plate.translation() = Eigen::Vector3d(0.0, 0.0, height) -
+                                      0.5 * plate.cols * plate.square_mm * along -
+                                      0.5 * plate.rows * plate.square_mm * across;
+        const Eigen::Isometry3d T_camera_plate = head.T_laser_camera.inverse() * T_laser_plate;
+        out.push_back({renderer.laser(plate, T_camera_plate, head.plane, rng), height, tilt_deg});
+    };
+    for (double h : plan.level_mm) take(h, 0.0);
+    for (double h : plan.tilted_mm) {
+        take(h, plan.tilt_deg);
+        take(h, -plan.tilt_deg);
+    }
+    return out;
+}
+
 }  // namespace hotgauge::sim

@@ -26,10 +26,13 @@ def main():
     ap.add_argument("--nok", default=None,
                     help="comma-separated features that must read NOK, all others not NOK")
     ap.add_argument("--verdict", help="the part's verdict it must read (OK, NOK, ...)")
+    ap.add_argument("--calibration", help="measure with this calibration.yaml")
     ap.add_argument("extra", nargs="*")
     a = ap.parse_args()
     truth = json.load(open(f"{a.recording_dir}/truth.json"))
     cmd = [a.hotgauge, "measure", f"{a.recording_dir}/part", "--json", *a.extra]
+    if a.calibration:
+        cmd += ["--calibration", a.calibration]
     out = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
     got = {f["name"]: f for f in out["features"]}
     bad = not_measured = 0

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -23,7 +24,7 @@ namespace hotgauge::calib {
 // laser origin along the camera's y; or `pinhole`, an image-mode calibration (calibrate_sensor):
 // the camera with its distortion and the laser plane, profiles in its laser_frame.
 struct SensorModel {
-    std::string model = "direct_beam";  // direct_beam | pinhole
+    std::string model = "direct_beam";  // direct_beam | pinhole | stage
     int width = 2048;
     double pitch_mm = 0.2;
     double standoff_mm = 890.0;
@@ -33,6 +34,8 @@ struct SensorModel {
     // model pinhole (width is the camera's; the direct-beam keys unused):
     PinholeCamera camera;
     LaserPlane plane;
+    // model stage (`calibrate sensor --stage`): the pixel → mm map itself (width its width_px).
+    acquire::CalibratedModel map;
 };
 
 struct FaceGeometry {
@@ -41,6 +44,10 @@ struct FaceGeometry {
     Eigen::Vector3d scan_direction = Eigen::Vector3d::UnitY();         // unit, world
     double travel_scale = 1.0;  // true travel / commanded travel (axis speed or encoder error)
     Eigen::Matrix3d R_camera_accel = Eigen::Matrix3d::Identity();  // accel axes → camera axes
+    // `calibrate faces`: the pose the artifact recording's face.yaml gave this face. A recording
+    // that places the head elsewhere (a stand-off or start set per part, as another tool's cell
+    // may) takes the calibration as a correction of its own pose (apply_geometry).
+    std::optional<Eigen::Isometry3d> recorded_camera_to_world;
 };
 
 struct Calibration {
@@ -68,6 +75,10 @@ core::Result<void> write_calibration(const Calibration& c, const std::filesystem
 
 // A recording's faces take the calibration's geometry in place of their face.yaml's: camera
 // pose, scan direction, accelerometer axes, and the profile positions scaled by travel_scale.
+// The pose is replaced when the face.yaml's is the calibration's own or the one it was calibrated
+// from (`recorded_camera_to_world`), or when that is unknown; a face.yaml that places the camera
+// elsewhere keeps its placement and takes the calibration's correction of the mount:
+// T = T_face.yaml · T_recorded⁻¹ · T_calibrated.
 // The profiles stay as recorded (they are millimetres already: the sensor model was applied at
 // capture), and so do the times (one clock by the recording contract). A face the calibration
 // does not hold is an error naming it and `calibration_file`; nothing is changed then.

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "hotgauge/calib/sensor.hpp"
+#include "hotgauge/calib/sensor_stage.hpp"
 #include "hotgauge/sim/simulator.hpp"
 
 namespace hotgauge::sim {
@@ -54,5 +55,21 @@ class TargetRenderer {
     RenderOptions options_;
     std::vector<float> rays_;  // per pixel, per sample: undistorted (x, y) at z = 1
 };
+
+// A precision stage's plan for calibrating the sensor (docs/calibration.md "Sensor on a stage"):
+// the plate level at `level` heights, and at ±tilt_deg at each `tilted` height (laser frame).
+struct StagePlan {
+    std::vector<double> level_mm, tilted_mm;
+    double tilt_deg = 30.0;
+};
+// 25 level heights over the measuring range (40 and 20 mm inside its ends: the virtual head's
+// first row sees 625 mm), 7 tilted ones at ±30°.
+StagePlan default_stage_plan(const SensorConfig& sensor);
+
+// The laser images the head takes of a flat plate on the stage, with the heights and tilts the
+// stage reports (exact). From `seed`.
+std::vector<calib::StageReading> stage_readings(const VirtualSensorCamera& head,
+                                                const StagePlan& plan, std::uint64_t seed,
+                                                RenderOptions options = {});
 
 }  // namespace hotgauge::sim
