@@ -77,11 +77,11 @@ int run_faces(const CalibrateArgs& a) {
     calib::Calibration* c = &*result.calibration;
     c->source = a.artifact + " scanned in " + a.recording;
     if (auto w = calib::write_calibration(*c, a.out); !w) return fail(w.error());
-    std::printf("%-8s %8s %7s %8s %-23s %-26s %10s %9s\n", "face", "rms mm", "spheres", "moved mm",
+    std::printf("%-8s %8s %7s %9s %-23s %-26s %10s %9s\n", "face", "rms mm", "spheres", "off by mm",
                 "σ position x y z mm", "σ rotation x y z °", "travel", "σ ppm");
     for (const auto& f : c->faces) {
         auto r = [&](const std::string& key) { return c->residuals.at(f.name + "." + key); };
-        std::printf("%-8s %8.4f %7g %8.3f %.4f %.4f %.4f   %.5f %.5f %.5f %10.6f %9.1f\n",
+        std::printf("%-8s %8.4f %7g %9.3f %.4f %.4f %.4f   %.5f %.5f %.5f %10.6f %9.1f\n",
                     f.name.c_str(), r("rms_mm"), r("spheres"), r("start_error_mm"),
                     r("sigma_position_x_mm"), r("sigma_position_y_mm"), r("sigma_position_z_mm"),
                     r("sigma_rotation_x_deg"), r("sigma_rotation_y_deg"), r("sigma_rotation_z_deg"),
