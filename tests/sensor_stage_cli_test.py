@@ -4,7 +4,7 @@ virtual head's readings of a plate on a precision stage, written by `simulate --
 calibrated into calibration.yaml's sensor (model stage, method sensor): the map's residuals at
 the micrometre level, the faces kept (to be aligned again); a stage file naming a missing image,
 an unknown key, too few tilted readings, and a views file given with --stage are refused by
-name, and the calibration in force is not written over."""
+name, and so is a plate 2° off level; the calibration in force is not written over."""
 import os
 import shutil
 import subprocess
@@ -56,7 +56,10 @@ with tempfile.TemporaryDirectory() as tmp:
     refused(good.replace("stage02.png", "nowhere.png"),
             "readings[1].laser: cannot read 'nowhere.png' as an 8-bit grey image")
     refused(good.replace("height_mm: 640", "heigth_mm: 640", 1), "unknown key 'heigth_mm'")
+    refused(good.replace("tilt_deg: 30.0", "tilt_deg: 2.0", 1),
+            "readings[25].tilt_deg: 0 (level) or 5° to 60° either way (tilted)")
     lines = good.splitlines(keepends=True)
     refused("".join(lines[:2 + 25 + 2]), "25 level and 2 tilted readings")
     refused(good, "a views file or --stage, not both", "views.yaml")
-    print("refusals: a missing image, an unknown key, too few tilted readings, views and stage")
+    print("refusals: a missing image, an unknown key, a tilt of 2°, too few tilted readings, views "
+          "and stage")

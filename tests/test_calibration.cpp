@@ -290,10 +290,11 @@ TEST(Calibration, ApplyGeometryReplacesWhatTheCaptureApplied) {
     EXPECT_EQ(same.faces[0].clock_offset_ns, 0);
 }
 
-// `calibrate faces` keeps the pose the artifact recording claimed. A recording that claims that
-// pose, or the calibration's own, takes the calibrated pose; one that places the head elsewhere
-// (another cell's stand-off or start set per part) keeps its placement and takes the calibrated
-// correction of the mount. The key survives write and read.
+// `calibrate faces` keeps the pose the artifact recording claimed. Another tool's recording that
+// claims that pose takes the calibrated one; one that places the head elsewhere (another cell's
+// stand-off or start set per part) keeps its placement and takes the calibrated correction of
+// the mount; a recording this software wrote (`geometry_source: calibration`, a fixed head) takes
+// the calibrated pose whatever it says. The keys survive write and read.
 TEST(Calibration, ApplyGeometryCorrectsAHeadPlacedElsewhere) {
     calib::Calibration c = example();
     calib::FaceGeometry& g = c.faces[0];
@@ -311,23 +312,44 @@ TEST(Calibration, ApplyGeometryCorrectsAHeadPlacedElsewhere) {
         back->faces[0].recorded_camera_to_world->matrix().isApprox(claimed.matrix(), 1e-15));
     EXPECT_FALSE(back->faces[1].recorded_camera_to_world);
 
-    auto applied = [&](const Eigen::Isometry3d& face_yaml) {
+    auto applied = [&](const Eigen::Isometry3d& face_yaml, bool ours) {
         hotgauge::core::Recording rec;
         hotgauge::core::FaceScan f;
         f.name = g.name;
         f.T_world_camera = face_yaml;
+        f.geometry_from_calibration = ours;
         rec.faces.push_back(f);
         f.name = c.faces[1].name;
         rec.faces.push_back(f);
         EXPECT_TRUE(calib::apply_geometry(*back, "c.yaml", rec).ok());
         return rec.faces[0].T_world_camera;
     };
-    EXPECT_TRUE(applied(claimed).isApprox(g.T_world_camera, 1e-12));
-    EXPECT_TRUE(applied(g.T_world_camera).isApprox(g.T_world_camera, 1e-12));
-    // The head 58.8 mm further along the scan and 1.1 mm nearer: the correction follows it.
+    EXPECT_TRUE(applied(claimed, false).isApprox(g.T_world_camera, 1e-12));
+    // The head 58.8 mm further along the scan and 1.1 mm nearer: so is the calibrated camera.
     Eigen::Isometry3d moved = claimed;
     moved.pretranslate(Eigen::Vector3d(1.1, 58.8, 0.0));
-    const Eigen::Isometry3d want = moved * claimed.inverse() * g.T_world_camera;
-    EXPECT_TRUE(applied(moved).isApprox(want, 1e-12));
-    EXPECT_GT((want.translation() - g.T_world_camera.translation()).norm(), 58.0);
+    Eigen::Isometry3d want = g.T_world_camera;
+    want.pretranslate(Eigen::Vector3d(1.1, 58.8, 0.0));
+    EXPECT_TRUE(applied(moved, false).isApprox(want, 1e-12));
+    // Written by this software with an older calibration in force: the new one replaces it.
+    EXPECT_TRUE(applied(moved, true).isApprox(g.T_world_camera, 1e-12));
+
+    hotgauge::core::Recording rec;
+    rec.part_id = "P1";
+    rec.recipe = "hub-a";
+    rec.captured_at = "2026-12-07T00:00:00Z";
+    hotgauge::core::FaceScan f;
+    f.name = "top";
+    f.width = 1;
+    f.profiles_mm = {1.0f, 900.0f};
+    f.profile_times_ns = {1'000'000'000};
+    f.profile_positions_mm = {0.0};
+    f.accel_mps2 = {0, 0, 9.81f, 0, 0, 9.81f};
+    f.accel_times_ns = {999'000'000, 1'002'000'000};
+    f.geometry_from_calibration = true;
+    rec.faces.push_back(f);
+    ASSERT_TRUE(hotgauge::io::write_recording(rec, tmp.path / "rec").ok());
+    auto read = hotgauge::io::read_recording(tmp.path / "rec");
+    ASSERT_TRUE(read.ok()) << read.error().message;
+    EXPECT_TRUE(read->faces[0].geometry_from_calibration);
 }

@@ -113,6 +113,13 @@ TEST(SensorStage, RefusesWhatCannotCalibrate) {
     ASSERT_FALSE(r);
     EXPECT_NE(r.error().message.find("5 level and 2 tilted readings"), std::string::npos)
         << r.error().message;
+    // A plate reported 1° off level: its x would be z's noise × 57.
+    auto slight = readings;
+    slight[0].tilt_deg = 1.0;
+    r = calib::calibrate_sensor_stage(slight);
+    ASSERT_FALSE(r);
+    EXPECT_NE(r.error().message.find("stage reading 1: tilt 1.0"), std::string::npos)
+        << r.error().message;
     // A dark image.
     for (auto& p : readings[2].laser.pixels) p = 5;
     r = calib::calibrate_sensor_stage(readings, 3, 1);

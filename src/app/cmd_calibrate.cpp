@@ -153,8 +153,6 @@ int run_hand_eye(const CalibrateArgs& a) {
     return 0;
 }
 
-// The head's camera and laser plane from checkerboard views into the calibration in force's
-// sensor (method `sensor`: the faces are to be aligned again, in the new sensor's frame).
 // calibrate sensor --stage: the pixel → mm map from a plate on a precision stage.
 int run_sensor_stage(const CalibrateArgs& a, const calib::Calibration& base) {
     auto readings = calib::read_sensor_stage(a.stage);
@@ -186,6 +184,9 @@ int run_sensor_stage(const CalibrateArgs& a, const calib::Calibration& base) {
     return 0;
 }
 
+// The head's camera and laser plane from checkerboard views into the calibration in force's
+// sensor (method `sensor`: the faces are to be aligned again, in the new sensor's frame), or the
+// stage's map (run_sensor_stage).
 int run_sensor(const CalibrateArgs& a) {
     constexpr double kMaxReprojectionPx = 0.3;
     auto base = calib::read_calibration(a.calibration);

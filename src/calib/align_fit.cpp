@@ -17,7 +17,7 @@ namespace {
 // surface is not on the artifact (posts, plate edges, spikes).
 constexpr double kFirstGateMm = 1.0;
 // A plane carries three numbers of the pose; this many of its points (evenly spread) fix them to
-// well under a micrometre, and keep the problem to about 10⁵ residuals per face.
+// well under a micrometre, and keep the problem to about 3.5 · 10⁵ residuals per face.
 constexpr std::size_t kMaxPlanePoints = 200000;
 
 // Signed distance of a point, placed by the pose, from its artifact surface.
@@ -97,7 +97,7 @@ std::vector<std::size_t> chosen_points(const Artifact& a, const Assignment& as,
 }
 
 struct Solved {
-    std::unique_ptr<ceres::LossFunction> loss;  // before the problem: destroyed after it
+    std::unique_ptr<ceres::LossFunction> loss;  // not owned by the problem (DO_NOT_TAKE_OWNERSHIP)
     std::unique_ptr<ceres::Problem> problem;
     int iterations = 0;
     double sum2 = 0.0;  // Σ r² at the solution, no loss
@@ -154,7 +154,9 @@ bool covariance(ceres::Problem& problem, FacePose& pose, double sigma2, Matrix9&
     std::vector<std::pair<const double*, const double*>> pairs;
     for (int i = 0; i < 3; ++i)
         for (int j = i; j < 3; ++j) pairs.emplace_back(blocks[i], blocks[j]);
-    FLAGS_minloglevel = google::GLOG_ERROR;  // a rank-deficient Jacobian is our message, not glog's
+    // A rank-deficient Jacobian is our message (the weak direction), not a glog warning; glog is
+    // Ceres's alone in this process.
+    FLAGS_minloglevel = google::GLOG_ERROR;
     ceres::Covariance::Options co;
     co.num_threads = 2;
     ceres::Covariance cov(co);
@@ -254,7 +256,6 @@ core::Result<PointFit> fit_points(const Artifact& a, const std::vector<ScanPoint
     }
     if (s.m <= 9) return core::make_error("fewer than 10 points on the artifact's surfaces");
     out.rms_mm = std::sqrt(s.sum2 / static_cast<double>(s.m));
-    out.sigma_mm = out.rms_mm;
     const double sigma2 = s.sum2 / static_cast<double>(s.m - 9);
     out.information = information(*s.problem, out.pose, sigma2);
     out.covariance_ok = covariance(*s.problem, out.pose, sigma2, out.covariance);

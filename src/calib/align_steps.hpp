@@ -64,7 +64,6 @@ struct PointFit {
     bool covariance_ok = false;                   // false: the Jacobian is rank deficient
     Matrix9 information = Matrix9::Zero();        // JᵀJ / σ² at the solution, same order
     double rms_mm = 0.0;                          // RMS of the points used
-    double sigma_mm = 0.0;                        // the residual's standard deviation (robust)
     std::vector<int> counts;                      // points used per artifact surface
     std::vector<double> mean_mm, rms_surface_mm;  // per artifact surface, over those points
     ResidualMap map;

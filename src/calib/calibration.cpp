@@ -246,16 +246,10 @@ core::Result<void> write_calibration(const Calibration& c, const std::filesystem
 
 namespace {
 
-bool same_pose(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
-    return (a.matrix() - b.matrix()).cwiseAbs().maxCoeff() < 1e-9;
-}
-
-// The calibrated pose of a face whose recording says `recorded` (apply_geometry's rule).
-Eigen::Isometry3d pose_for(const FaceGeometry& g, const Eigen::Isometry3d& recorded) {
-    if (!g.recorded_camera_to_world || same_pose(recorded, g.T_world_camera) ||
-        same_pose(recorded, *g.recorded_camera_to_world))
-        return g.T_world_camera;
-    return recorded * g.recorded_camera_to_world->inverse() * g.T_world_camera;
+// The calibrated pose of a face whose face.yaml says `recorded` (apply_geometry's rule).
+Eigen::Isometry3d pose_for(const FaceGeometry& g, const core::FaceScan& f) {
+    if (f.geometry_from_calibration || !g.recorded_camera_to_world) return g.T_world_camera;
+    return f.T_world_camera * g.recorded_camera_to_world->inverse() * g.T_world_camera;
 }
 
 }  // namespace
@@ -268,7 +262,7 @@ core::Result<void> apply_geometry(const Calibration& c, const std::string& calib
                                     "' (the recording has it)");
     for (auto& f : recording.faces) {
         const FaceGeometry& g = *c.face(f.name);
-        f.T_world_camera = pose_for(g, f.T_world_camera);
+        f.T_world_camera = pose_for(g, f);
         f.scan_direction = g.scan_direction;
         f.R_camera_accel = g.R_camera_accel;
         const double rescale = g.travel_scale / f.travel_scale;

@@ -1,6 +1,6 @@
 #include "hotgauge/calib/sensor_stage.hpp"
 
-#include <Eigen/Cholesky>
+#include <Eigen/QR>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -25,6 +25,10 @@ core::Result<std::vector<Stripe>> stripes(const std::vector<StageReading>& readi
         if (!(std::abs(r.tilt_deg) < 60.0))
             return core::make_error(w + "tilt " + std::to_string(r.tilt_deg) +
                                     "° (at most 60°: the line must stay in the field)");
+        if (r.tilt_deg != 0.0 && std::abs(r.tilt_deg) < 5.0)
+            return core::make_error(w + "tilt " + std::to_string(r.tilt_deg) +
+                                    "°: level is 0, a tilted plate 5° or more (x = (z − height) / "
+                                    "tan(tilt) multiplies z's noise by 1/tan(tilt))");
         if (!(r.height_mm > 0.0)) return core::make_error(w + "height must be positive");
         Stripe s{stripe_rows(r.laser), r.height_mm, std::tan(r.tilt_deg * kDeg)};
         // A point whose extraction window and background band (4 + 3 rows) are cut by the
@@ -77,26 +81,31 @@ std::vector<acquire::CalibrationSample> tilted_samples(const std::vector<Stripe>
 // samples' noise. Returns the RMS of x.
 constexpr int kAcross = 6;
 
-double fit_x_surface(const std::vector<acquire::CalibrationSample>& samples, int x_degree,
-                     acquire::CalibratedModel& m) {
+core::Result<double> fit_x_surface(const std::vector<acquire::CalibrationSample>& samples,
+                                   int x_degree, acquire::CalibratedModel& m) {
     const double mid_u = 0.5 * (m.width_px - 1), mid_v = 0.5 * (m.height_px - 1);
     const int n = (kAcross + 1) * (x_degree + 1);
-    auto regressors = [&](double u, double v, double z, Eigen::VectorXd& row) {
-        const double a = (u - mid_u) / mid_u, t = (v - mid_v) / mid_v;
+    Eigen::MatrixXd A(static_cast<Eigen::Index>(samples.size()), n);
+    Eigen::VectorXd b(A.rows());
+    for (Eigen::Index k = 0; k < A.rows(); ++k) {
+        const acquire::CalibrationSample& s = samples[static_cast<std::size_t>(k)];
+        const double a = (s.u_px - mid_u) / mid_u, t = (s.v_px - mid_v) / mid_v;
         double pa = 1.0;
         for (int i = 0; i <= kAcross; ++i, pa *= a) {
             double pt = 1.0;
-            for (int j = 0; j <= x_degree; ++j, pt *= t) row(i * (x_degree + 1) + j) = z * pa * pt;
+            for (int j = 0; j <= x_degree; ++j, pt *= t)
+                A(k, i * (x_degree + 1) + j) = s.z_mm * pa * pt;
         }
-    };
-    Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n, n);
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(n), row(n);
-    for (const auto& s : samples) {
-        regressors(s.u_px, s.v_px, s.z_mm, row);
-        H.selfadjointView<Eigen::Lower>().rankUpdate(row);
-        g += row * s.x_mm;
+        b(k) = s.x_mm;
     }
-    const Eigen::VectorXd c = Eigen::MatrixXd(H.selfadjointView<Eigen::Lower>()).ldlt().solve(g);
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
+    if (qr.rank() < n)
+        return core::make_error(
+            "the tilted plates' lines do not cover the image enough to fix "
+            "the x law (rank " +
+            std::to_string(qr.rank()) + " of " + std::to_string(n) +
+            "): tilt the plate at more heights");
+    const Eigen::VectorXd c = qr.solve(b);
     m.x_degree = x_degree;
     m.x_coefficients.assign(static_cast<std::size_t>(m.width_px) * (x_degree + 1), 0.0);
     for (int col = 0; col < m.width_px; ++col) {
@@ -107,18 +116,33 @@ double fit_x_surface(const std::vector<acquire::CalibrationSample>& samples, int
                 m.x_coefficients[static_cast<std::size_t>(col) * (x_degree + 1) + j] +=
                     pa * c(i * (x_degree + 1) + j);
     }
-    double sum2 = 0.0;
-    for (const auto& s : samples) {
-        regressors(s.u_px, s.v_px, s.z_mm, row);
-        sum2 += std::pow(row.dot(c) - s.x_mm, 2);
+    return std::sqrt((A * c - b).squaredNorm() / static_cast<double>(A.rows()));
+}
+
+// The fan (x = k·(u − u0)·z) that best fits the tilted samples: the model's u0_px and
+// x_pitch_mm, which the x law supersedes but which describe the head (and start to_image).
+void fit_fan(const std::vector<acquire::CalibrationSample>& samples, acquire::CalibratedModel& m) {
+    Eigen::MatrixXd A(static_cast<Eigen::Index>(samples.size()), 2);
+    Eigen::VectorXd b(A.rows());
+    for (Eigen::Index k = 0; k < A.rows(); ++k) {
+        const acquire::CalibrationSample& s = samples[static_cast<std::size_t>(k)];
+        A(k, 0) = s.u_px * s.z_mm;
+        A(k, 1) = -s.z_mm;
+        b(k) = s.x_mm;
     }
-    return std::sqrt(sum2 / static_cast<double>(std::max<std::size_t>(samples.size(), 1)));
+    const Eigen::Vector2d fan = A.colPivHouseholderQr().solve(b);
+    if (fan(0) > 0.0) {
+        m.x_pitch_mm = fan(0) * m.reference_range_mm;
+        m.u0_px = fan(1) / fan(0);
+    }
 }
 
 }  // namespace
 
 core::Result<StageFit> calibrate_sensor_stage(const std::vector<StageReading>& readings, int degree,
                                               int x_degree) {
+    if (degree < 1 || degree > 5 || x_degree < 1 || x_degree > 5)
+        return core::make_error("stage: degree and x_degree must be in [1, 5]");
     auto s = stripes(readings);
     if (!s) return s.error();
     int n_level = 0;
@@ -143,7 +167,10 @@ core::Result<StageFit> calibrate_sensor_stage(const std::vector<StageReading>& r
     if (!law) return law.error();
     // 2. The x law from the tilted plates, through the range law.
     const auto tilted_points = tilted_samples(*s, *law);
-    fit->rms_x_mm = fit_x_surface(tilted_points, x_degree, fit->model);
+    auto rms_x = fit_x_surface(tilted_points, x_degree, fit->model);
+    if (!rms_x) return core::make_error("stage, tilted plates: " + rms_x.error().message);
+    fit->rms_x_mm = *rms_x;
+    fit_fan(tilted_points, fit->model);
     if (auto ok = acquire::Triangulation::calibrated(fit->model); !ok)
         return core::make_error("stage, tilted plates: " + ok.error().message);
     StageFit out;

@@ -1,5 +1,6 @@
 // The sensor calibration's files and their images: the views file (image mode) and the stage
 // file (docs/calibration.md "Sensor", "Sensor on a stage").
+#include <cmath>
 #include <opencv2/imgcodecs.hpp>
 
 #include "hotgauge/calib/sensor.hpp"
@@ -60,7 +61,11 @@ core::Result<std::vector<StageReading>> read_sensor_stage(const std::filesystem:
                                  r.laser.height != out.front().laser.height))
                 y.fail(list[i]["laser"], w + ".laser: '" + name + "' is not the size of the first");
             r.height_mm = y.number(y.require(list[i], w, "height_mm"), w + ".height_mm");
+            if (!(r.height_mm > 0.0)) y.fail(list[i]["height_mm"], w + ".height_mm: must be > 0");
             r.tilt_deg = y.number(y.require(list[i], w, "tilt_deg"), w + ".tilt_deg");
+            if (!(std::abs(r.tilt_deg) < 60.0) || (r.tilt_deg != 0.0 && std::abs(r.tilt_deg) < 5.0))
+                y.fail(list[i]["tilt_deg"],
+                       w + ".tilt_deg: 0 (level) or 5° to 60° either way (tilted)");
             out.push_back(std::move(r));
         }
         return out;

@@ -743,6 +743,7 @@ std::optional<Failure> Daemon::Impl::scan_face(const Setup& s, const std::string
             out->face.travel_scale =
                 face->travel_scale;  // applied above: a recalibration replaces it
             out->face.clock_offset_ns = sc.clock_offset_ns;
+            out->face.geometry_from_calibration = true;
             c.rec.faces.push_back(std::move(out->face));
             return std::nullopt;
         }

@@ -306,6 +306,11 @@ Result<FaceScan> read_face(const fs::path& root, const std::string& name) {
             return make_error(where(fy) + "'clock_offset_ns' must be an integer" + line_of(n));
         f.clock_offset_ns = static_cast<std::int64_t>(*v);
     }
+    if (const YAML::Node n = (*doc)["geometry_source"]) {
+        if (!n.IsScalar() || n.Scalar() != "calibration")
+            return make_error(where(fy) + "'geometry_source' must be 'calibration'" + line_of(n));
+        f.geometry_from_calibration = true;
+    }
 
     auto prof = read_array(dir, "profiles.npy", "<f4", 3, {-1, 2}, "(N, W, 2)");
     if (!prof) return prof.error();
@@ -433,6 +438,7 @@ Result<void> write_face(const FaceScan& f, const fs::path& dir) {
     // Our own keys (readers of the contract ignore them): what the capture already applied.
     if (f.travel_scale != 1.0) y += "travel_scale: " + fmt_double(f.travel_scale) + "\n";
     if (f.clock_offset_ns != 0) y += "clock_offset_ns: " + std::to_string(f.clock_offset_ns) + "\n";
+    if (f.geometry_from_calibration) y += "geometry_source: calibration\n";
     if (auto ok = write_text(dir / "face.yaml", y); !ok) return ok;
 
     const std::int64_t N = f.n_profiles(), K = f.n_accel();

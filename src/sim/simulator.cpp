@@ -95,6 +95,7 @@ core::Result<void> scan_face(const Scene& scene, const CellConfig& cell, const F
     face.R_camera_accel = rg->R_camera_accel;
     face.travel_scale = rg->travel_scale;
     face.clock_offset_ns = rg->clock_offset_ns;
+    face.geometry_from_calibration = true;  // as the cell's software writes it
     face.width = s.width;
     face.profiles_mm.assign(static_cast<std::size_t>(n * s.width * 2),
                             std::numeric_limits<float>::quiet_NaN());

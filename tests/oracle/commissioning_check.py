@@ -105,12 +105,16 @@ def main():
     ap.add_argument("--report", action="store_true", help="check the HTML reports in Chromium")
     a = ap.parse_args()
     artifact = f"{a.case}/artifact"
-    certificate = [n for n in os.listdir(artifact) if n.endswith(".yaml")][0]
+    # The certificate is the artifact file whose name the scan's recipe gives.
+    recipe = yaml.safe_load(open(f"{artifact}/part/part.yaml"))["recipe"]
+    certificate = [n for n in sorted(os.listdir(artifact)) if n.endswith(".yaml")
+                   and (yaml.safe_load(open(f"{artifact}/{n}")) or {}).get("artifact") == recipe][0]
+    nominal = os.path.join(os.path.dirname(__file__), "../../config/calibration.yaml")
     with tempfile.TemporaryDirectory() as tmp:
         out = f"{tmp}/calibration.yaml"
         run = subprocess.run([a.hotgauge, "calibrate", "faces", "--artifact",
-                              f"{artifact}/{certificate}", f"{artifact}/part", "--out", out,
-                              "--report", f"{tmp}/report"], capture_output=True, text=True)
+                              f"{artifact}/{certificate}", f"{artifact}/part", "--calibration",
+                              nominal, "--out", out, "--report", f"{tmp}/report"], capture_output=True, text=True)
         print(run.stdout + run.stderr, end="")
         if run.returncode != 0:
             sys.exit(1)

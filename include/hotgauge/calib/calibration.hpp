@@ -44,9 +44,9 @@ struct FaceGeometry {
     Eigen::Vector3d scan_direction = Eigen::Vector3d::UnitY();         // unit, world
     double travel_scale = 1.0;  // true travel / commanded travel (axis speed or encoder error)
     Eigen::Matrix3d R_camera_accel = Eigen::Matrix3d::Identity();  // accel axes → camera axes
-    // `calibrate faces`: the pose the artifact recording's face.yaml gave this face. A recording
-    // that places the head elsewhere (a stand-off or start set per part, as another tool's cell
-    // may) takes the calibration as a correction of its own pose (apply_geometry).
+    // `calibrate faces`: the pose the artifact recording's face.yaml gave this face. Another
+    // tool's recording, which may place the head per part (stand-off, start), takes the
+    // calibration as a correction of its own pose (apply_geometry).
     std::optional<Eigen::Isometry3d> recorded_camera_to_world;
 };
 
@@ -75,10 +75,11 @@ core::Result<void> write_calibration(const Calibration& c, const std::filesystem
 
 // A recording's faces take the calibration's geometry in place of their face.yaml's: camera
 // pose, scan direction, accelerometer axes, and the profile positions scaled by travel_scale.
-// The pose is replaced when the face.yaml's is the calibration's own or the one it was calibrated
-// from (`recorded_camera_to_world`), or when that is unknown; a face.yaml that places the camera
-// elsewhere keeps its placement and takes the calibration's correction of the mount:
-// T = T_face.yaml · T_recorded⁻¹ · T_calibrated.
+// The pose is replaced when this software wrote the recording (face.yaml's `geometry_source:
+// calibration`: a fixed head, its pose a calibration's) or when the calibration does not say
+// what pose it was made from. Another tool's recording keeps its own placement of the head and
+// takes the calibration's correction of the mount: T = T_face.yaml · T_recorded⁻¹ · T_calibrated
+// (T_recorded: `recorded_camera_to_world`, the artifact recording's claim).
 // The profiles stay as recorded (they are millimetres already: the sensor model was applied at
 // capture), and so do the times (one clock by the recording contract). A face the calibration
 // does not hold is an error naming it and `calibration_file`; nothing is changed then.

@@ -25,6 +25,10 @@ struct FaceScan {
     // them (calib::apply_geometry). Other writers leave them out: 1 and 0.
     double travel_scale = 1.0;
     std::int64_t clock_offset_ns = 0;
+    // face.yaml's optional `geometry_source: calibration`: the pose and axes are a calibration's
+    // of a fixed head (this software writes it). Another calibration then replaces them; in a
+    // recording without it, a head placed elsewhere keeps its placement (calib::apply_geometry).
+    bool geometry_from_calibration = false;
 
     std::int64_t width = 0;                      // W points per profile
     std::vector<float> profiles_mm;              // N*W*2: (x, z) camera frame, NaN = no return
