@@ -167,7 +167,7 @@ bool covariance(ceres::Problem& problem, FacePose& pose, double sigma2, Matrix9&
             Eigen::Matrix<double, 3, 3, Eigen::RowMajor> b;
             cov.GetCovarianceBlockInTangentSpace(blocks[i], blocks[j], b.data());
             C.block<3, 3>(3 * i, 3 * j) = b * scale[i] * scale[j] * sigma2;
-            C.block<3, 3>(3 * j, 3 * i) = C.block<3, 3>(3 * i, 3 * j).transpose();
+            if (j != i) C.block<3, 3>(3 * j, 3 * i) = C.block<3, 3>(3 * i, 3 * j).transpose();
         }
     return true;
 }
