@@ -188,10 +188,6 @@ FaceGeometry geometry_of(const core::FaceScan& f, const detail::FacePose& pose) 
     return g;
 }
 
-}  // namespace
-
-namespace {
-
 // Step 1: the balls found near where the recording's geometry puts them, the face placed from
 // their centres, then the balls found again from there (a start 2° off shears a ball by 0.6 mm in
 // the recorded geometry, more than the RANSAC band) and the face placed again. `balls`: the ones

@@ -67,6 +67,12 @@ Assignment assign(const Artifact& a, const std::vector<ScanPoint>& pts, const Fa
     return as;
 }
 
+// The assignment a smaller gate would give: a point's nearest surface is the same, or none.
+void keep_within(Assignment& as, double gate_mm) {
+    for (std::size_t i = 0; i < as.surface.size(); ++i)
+        if (!(std::abs(as.distance[i]) < gate_mm)) as.surface[i] = -1;
+}
+
 // 1.4826 × the median absolute distance of the assigned points: the noise, robust to outliers.
 double robust_sigma(const Assignment& as) {
     std::vector<double> d;
@@ -242,24 +248,24 @@ core::Result<PointFit> fit_points(const Artifact& a, const std::vector<ScanPoint
     Assignment as = assign(a, pts, out.pose, kFirstGateMm);
     double sigma = robust_sigma(as);
     Solved s;
-    Assignment used_as;
     std::vector<std::size_t> use;
     for (int round = 0; round < 2; ++round) {
+        if (round > 0) {  // the noise measured at the first fit's pose, and its points within 5σ
+            as = assign(a, pts, out.pose, kFirstGateMm);
+            sigma = robust_sigma(as);
+            keep_within(as, std::min(kFirstGateMm, 5.0 * sigma));
+        }
         if (!(sigma > 0.0)) return core::make_error("no point lies on the artifact's surfaces");
         use = chosen_points(a, as, out.counts);
-        used_as = as;
         s = solve(a, pts, as, use, 3.0 * sigma, out.pose);
         out.iterations += s.iterations;
-        as = assign(a, pts, out.pose, kFirstGateMm);  // the noise measured at the new pose
-        sigma = robust_sigma(as);
-        as = assign(a, pts, out.pose, std::min(kFirstGateMm, 5.0 * sigma));
     }
     if (s.m <= 9) return core::make_error("fewer than 10 points on the artifact's surfaces");
     out.rms_mm = std::sqrt(s.sum2 / static_cast<double>(s.m));
     const double sigma2 = s.sum2 / static_cast<double>(s.m - 9);
     out.information = information(*s.problem, out.pose, sigma2);
     out.covariance_ok = covariance(*s.problem, out.pose, sigma2, out.covariance);
-    summarize(a, pts, used_as, use, out);
+    summarize(a, pts, as, use, out);
     return out;
 }
 

@@ -144,10 +144,7 @@ core::Result<void> write_sensor_views(const SensorViews& s, const std::filesyste
             if (img->empty()) continue;
             const std::string name =
                 std::string(stem) + (img == &s.views[i].board ? "-board.png" : "-laser.png");
-            const cv::Mat m(img->height, img->width, CV_8UC1,
-                            const_cast<std::uint8_t*>(img->pixels.data()));
-            if (!cv::imwrite((dir / name).string(), m))
-                return core::make_error((dir / name).string() + ": cannot write");
+            if (auto w = write_png(*img, dir / name); !w) return w;
             y += std::string(img == &s.views[i].board ? "board: " : ", laser: ") + name;
         }
         y += "}\n";
