@@ -194,12 +194,11 @@ struct Normal {
     double sse = 0;
     double n = 0;
 };
-Normal normal_equations(const std::vector<CornerPoint>& pts, const std::vector<char>& use,
+Normal normal_equations(const std::vector<CornerPoint>& pts, const std::vector<std::uint32_t>& used,
                         double side, const Vec7& v, const Thinning& th) {
     Normal out;
     const Shape shape(from(v));
-    for (std::size_t q = 0; q < pts.size(); ++q) {
-        if (!use[q]) continue;
+    for (const std::uint32_t q : used) {
         Vec7 g;
         int part = 0;
         const double e = residual(shape, side, pts[q], &g, &part), w = th.weight(pts[q]);
@@ -240,7 +239,12 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
         }
         return c;
     };
-    Normal raw = normal_equations(pts, use, side, x, th);  // at x, without the priors
+    // The samples in use, listed once: a solve passes over them 5-30 times.
+    std::vector<std::uint32_t> used;
+    used.reserve(pts.size());
+    for (std::size_t q = 0; q < pts.size(); ++q)
+        if (use[q]) used.push_back(static_cast<std::uint32_t>(q));
+    Normal raw = normal_equations(pts, used, side, x, th);  // at x, without the priors
     const double n = std::max(raw.n, 1.0);
     sigma2 = std::max(raw.sse / n, 1e-6);
     Mat7 A;
@@ -255,7 +259,7 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
         xn[4] = std::clamp(xn[4], 0.0, 2.0 * prior.rho_max + 0.5);
         xn[5] = std::clamp(xn[5], 0.0, 2.0 * prior.rho_max + 0.5);
         if (far) xn[6] = std::max(xn[6], 0.05);
-        const Normal next = normal_equations(pts, use, side, xn, th);
+        const Normal next = normal_equations(pts, used, side, xn, th);
         Mat7 An;
         Vec7 bn;
         const double c1 = with_prior(xn, next, An, bn);
@@ -267,6 +271,9 @@ Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, d
             lambda = std::max(lambda * 0.3, 1e-9);
             if (done) break;
         } else {
+            // A step that raises the cost by no more than the tolerance: x is the minimum to
+            // within it, as when a step lowers it by no more (more steps only raise lambda).
+            if (c1 - c0 < 1e-9 * c0) break;
             lambda *= 10.0;
             if (lambda > 1e8) break;
         }
