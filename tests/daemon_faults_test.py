@@ -22,6 +22,7 @@ and after each, the daemon still runs and no earlier result is lost from the fil
     /usr/bin/python3 daemon_faults_test.py BUILD_DIR
 """
 import json
+import re
 import os
 import shutil
 import signal
@@ -204,10 +205,25 @@ def main():
         alive(line)
         p = part()
         expect_ok(p)
+        # systemctl status shows STATUS=: after the part, idle again (the daemon says so within
+        # its loop period of the PLC's acknowledgement), the rejection still in it (issue 39: it
+        # had been overwritten in the same millisecond).
+        deadline = time.monotonic() + 5
+        while not line.notify.values("STATUS")[-1][1].startswith("idle"):
+            assert time.monotonic() < deadline, line.notify.values("STATUS")[-3:]
+            time.sleep(0.05)
+        status = [v for _, v in line.notify.values("STATUS")]
+        assert "reload rejected at" in status[-1], status[-3:]
+        assert re.search(r"hotgauged\.yaml:\d+", status[-1]), status[-1]  # the file and line
         with open(line.config_path, "w") as f:
             f.write(good_config)
         line.daemon.proc.send_signal(signal.SIGHUP)
         line.daemon.wait_line(r"reloaded: config hash", 10)
+        deadline = time.monotonic() + 5
+        while "reload rejected" in line.notify.values("STATUS")[-1][1]:
+            assert time.monotonic() < deadline, line.notify.values("STATUS")[-3:]
+            time.sleep(0.05)
+        print(f"   STATUS= after the rejected reload and a part: {status[-1][:100]}...")
         files_intact()
 
         step("5. the results directory is full")
@@ -293,6 +309,32 @@ def main():
         files_intact()
         assert kept[-1]["sequence"] == last + 1, kept[-1]["sequence"]
         assert p["sequence"] == (last + 1) & 0xFFFF, p
+
+        step("7a. a part that faults 206, then a restart: its sequence number is not used again")
+        # Issue 39: the next number was read from the files, which the 206 part never reached,
+        # so the journal's SEQ= named two parts. The numbers used are kept in results/.sequence.
+        big = max(os.path.getsize(os.path.join(line.results_dir, f))
+                  for f in os.listdir(line.results_dir))
+        subprocess.run(["prlimit", "--pid", str(line.daemon.proc.pid), f"--fsize={big}:unlimited"],
+                       check=True)
+        p = part(expect_state=vl.FAULT)
+        assert p["error"] == 206, p
+        files_intact()
+        last = kept[-1]["sequence"]
+        # The part's journal line (written after the registers): the number it used.
+        used = int(line.daemon.wait_line(rf"part {500 + n} seq (\d+) recipe \S+: FAULT 206",
+                                         10).group(1))
+        assert used == last + 1, (used, last)
+        plc.close()
+        plc = kill_and_restart("killed-after-206")
+        r = vl.decode(plc.inputs())
+        assert r["sequence"] == last & 0xFFFF, r  # input 5: the last committed part
+        p = part()
+        expect_ok(p)
+        files_intact()
+        print(f"   the 206 part used seq {used}; after the restart the next part is "
+              f"seq {kept[-1]['sequence']}")
+        assert kept[-1]["sequence"] == used + 1, (kept[-1]["sequence"], used)
 
         step("7b. hotgauged killed (kill -9) mid-part; the PLC triggers the part again")
         # The dead process also left the camera acquiring: the new one stops that acquisition

@@ -10,6 +10,7 @@ refused while BUSY, NOK / not measured / degraded parts, FAULT -> reset, and exc
     /usr/bin/python3 plc_pymodbus_test.py HOTGAUGE_BINARY
 """
 import math
+import re
 import os
 import signal
 import subprocess
@@ -257,8 +258,31 @@ def check_order(tmp, recipe, name, wordorder):
         assert plc.exception(c.read_input_registers(0, 126, slave=UNIT)) == 3
         assert plc.exception(c.read_coils(0, 8, slave=UNIT)) == 1
         assert plc.exception(c.read_input_registers(0, 1, slave=7)) == 0x0B
+        documented_ranges_hold(plc)
         assert plc.state() == IDLE
         plc.close()
+
+
+def documented_ranges_hold(plc):
+    """docs/plc-modbus.md "Bad input": the addresses its table says are outside the map get
+    exception 02, the ones either side of each border inside it are answered (issue 39: the table
+    said input 112 and holding 212 while the map had grown to 122 and 222)."""
+    doc = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "docs", "plc-modbus.md")
+    text = open(doc, encoding="utf-8").read()
+    m = re.search(r"read outside the map \(input ≥ (\d+), holding (\d+)–(\d+) or ≥ (\d+)", text)
+    assert m, "docs/plc-modbus.md: the bad-input table's read row is not where this test reads it"
+    first_input, hole_lo, hole_hi, first_holding = (int(g) for g in m.groups())
+    c = plc.client
+    assert not c.read_input_registers(first_input - 1, 1, slave=UNIT).isError()
+    assert plc.exception(c.read_input_registers(first_input, 1, slave=UNIT)) == 2
+    assert plc.exception(c.read_input_registers(first_input - 1, 2, slave=UNIT)) == 2
+    assert not c.read_holding_registers(hole_lo - 1, 1, slave=UNIT).isError()
+    for a in (hole_lo, hole_hi, first_holding):
+        assert plc.exception(c.read_holding_registers(a, 1, slave=UNIT)) == 2, a
+    assert not c.read_holding_registers(hole_hi + 1, 1, slave=UNIT).isError()
+    assert not c.read_holding_registers(first_holding - 1, 1, slave=UNIT).isError()
+    print(f"documented map borders hold: inputs < {first_input}, holdings < {hole_lo} and "
+          f"{hole_hi + 1}-{first_holding - 1}")
 
 
 def main():

@@ -276,7 +276,8 @@ class Plc(vl.Plc):
             self.client = None
 
     def inputs(self):
-        return self.call(lambda c: c.read_input_registers(0, 112, slave=vl.UNIT), "read").registers
+        return self.call(lambda c: c.read_input_registers(0, vl.N_INPUTS, slave=vl.UNIT),
+                         "read").registers
 
     def write(self, address, values):
         self.call(lambda c: c.write_registers(address, values, slave=vl.UNIT), f"write {address}")

@@ -172,8 +172,18 @@ TEST(Daemon, ACameraThatIsNotThereFailsThePartWithItsReasonAndTheDaemonGoesOn) {
     EXPECT_EQ((*daemon)->stats().reloads, 1u);
     {
         std::lock_guard lock(status_mutex);
-        EXPECT_TRUE(std::any_of(status.begin(), status.end(),
-                                [](const auto& s) { return s.rfind("reload rejected", 0) == 0; }));
+        // Issue 39: the rejection stays in STATUS= through the state changes after it, until
+        // a reload succeeds.
+        const auto rejected = std::find_if(status.begin(), status.end(), [](const auto& s) {
+            return s.find("— reload rejected at ") != std::string::npos;
+        });
+        ASSERT_NE(rejected, status.end());
+        EXPECT_NE(rejected->find("hotgauged.yaml"), std::string::npos) << *rejected;
+        EXPECT_TRUE(std::any_of(rejected + 1, status.end(), [](const auto& s) {
+            return s.rfind("idle", 0) == 0 && s.find("reload rejected") != std::string::npos;
+        })) << "an idle state after the rejection still says so";
+        EXPECT_EQ(status.back().find("reload rejected"), std::string::npos)
+            << "after the good reload: " << status.back();
         EXPECT_TRUE(std::any_of(status.begin(), status.end(),
                                 [](const auto& s) { return s.rfind("busy: part 77", 0) == 0; }));
     }

@@ -12,6 +12,7 @@
 #include "hotgauge/io/recording_io.hpp"
 #include "hotgauge/results/archive.hpp"
 #include "hotgauge/results/results_log.hpp"
+#include "hotgauge/results/sequence.hpp"
 #include "temp_dir.hpp"
 
 namespace hotgauge {
@@ -329,6 +330,41 @@ TEST(ResultsLog, AnUnwritableFolderIsNamed) {
     auto log = results::ResultsLog::open({"/proc/hotgauge-results", true});
     ASSERT_FALSE(log.ok());
     EXPECT_NE(log.error().message.find("/proc/hotgauge-results"), std::string::npos);
+}
+
+// The sequence numbers used are kept apart from the results (issue 39): a number reserved and
+// never committed (FAULT 206, a crash) is still known after a restart, in place on a full disk,
+// and a file that is not a number is refused with its name.
+TEST(SequenceReservation, KeepsTheHighestNumberUsedAcrossReopeningAndAFullDisk) {
+    test::TempDir tmp;
+    {
+        auto s = results::SequenceReservation::open(tmp.path);
+        ASSERT_TRUE(s.ok()) << s.error().message;
+        EXPECT_EQ(s->reserved(), 0u);
+        ASSERT_TRUE(s->reserve(41).ok());
+        ASSERT_TRUE(s->reserve(42).ok());
+    }
+    {
+        auto s = results::SequenceReservation::open(tmp.path);
+        ASSERT_TRUE(s.ok());
+        EXPECT_EQ(s->reserved(), 42u);
+        // A full disk (no file may grow past its size): the number is written in place.
+        signal(SIGXFSZ, SIG_IGN);
+        rlimit old{};
+        getrlimit(RLIMIT_FSIZE, &old);
+        rlimit none = old;
+        none.rlim_cur = std::filesystem::file_size(tmp.path / ".sequence");
+        ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &none), 0);
+        const auto kept = s->reserve(18446744073709551615ull);
+        setrlimit(RLIMIT_FSIZE, &old);
+        signal(SIGXFSZ, SIG_DFL);
+        EXPECT_TRUE(kept.ok()) << kept.error().message;
+    }
+    EXPECT_EQ(results::SequenceReservation::open(tmp.path)->reserved(), 18446744073709551615ull);
+    std::ofstream(tmp.path / ".sequence") << "forty-two\n";
+    const auto bad = results::SequenceReservation::open(tmp.path);
+    ASSERT_FALSE(bad.ok());
+    EXPECT_NE(bad.error().message.find(".sequence"), std::string::npos) << bad.error().message;
 }
 
 }  // namespace

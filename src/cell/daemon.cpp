@@ -29,6 +29,7 @@
 #include "hotgauge/plc/server.hpp"
 #include "hotgauge/results/archive.hpp"
 #include "hotgauge/results/results_log.hpp"
+#include "hotgauge/results/sequence.hpp"
 #include "hotgauge/web/server.hpp"
 #include "plant_feed.hpp"
 #include "plc_result.hpp"
@@ -275,10 +276,29 @@ struct Daemon::Impl {
     std::optional<results::RawArchive> archive;
     std::optional<QualityFeed> quality;  // drift watch, the day's lot report
     std::string log_error;               // why the results files could not be opened
+    // Control thread only: the sequence numbers used, kept in the results folder
+    // (docs/results.md "Sequence numbers"), or why they cannot be.
+    std::optional<results::SequenceReservation> sequences;
+    std::string sequences_error;
+    void open_sequences(const fs::path& dir);
+    core::Result<std::uint64_t> take_sequence();
+    void refuse(const plc::TriggerRequest& t, const std::string& recipe, const std::string& reason,
+                plc::ErrorCode error);
 
     static std::int64_t steady_ns() {
         return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
             .count();
+    }
+    // systemd's STATUS=: the state, and a rejected reload until a reload succeeds (the journal
+    // has the whole message; `systemctl status` shows this line).
+    std::string reload_note;  // under stats_mutex
+    void publish_status() {
+        std::string text;
+        {
+            std::lock_guard lock(stats_mutex);
+            text = reload_note.empty() ? stats.state : stats.state + " — " + reload_note;
+        }
+        if (sup.status) sup.status(text);
     }
     void set_state(const std::string& s) {
         {
@@ -288,7 +308,7 @@ struct Daemon::Impl {
         }
         board->set_state(s);
         plant->state(s);
-        if (sup.status) sup.status(s);
+        publish_status();
     }
 
     void control_loop();
@@ -423,28 +443,22 @@ void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
     }
     const plc::TriggerRequest& t = ev.trigger;
     const auto r = setup->recipes.find(t.recipe_slot);
-    if (r == setup->recipes.end()) {
-        // Refused before it becomes a part: no sequence number, no row; the PLC and the
-        // journal get the reason.
-        const std::string why = "part " + std::to_string(t.part_id) + ": no recipe in slot " +
-                                std::to_string(t.recipe_slot) + ": PLC fault 202";
-        log_part({0, std::to_string(t.part_id), "slot " + std::to_string(t.recipe_slot), "FAULT",
-                  why, true});
-        board->event(why, true);
-        server->fault(code(plc::ErrorCode::kUnknownRecipe));
-        plant->refused(code(plc::ErrorCode::kUnknownRecipe));
-        std::lock_guard lock(stats_mutex);
-        ++stats.triggers;
-        ++stats.failed;
-        return;
-    }
+    if (r == setup->recipes.end())
+        return refuse(t, "slot " + std::to_string(t.recipe_slot),
+                      "no recipe in slot " + std::to_string(t.recipe_slot),
+                      plc::ErrorCode::kUnknownRecipe);
+    const auto sequence = take_sequence();
+    if (!sequence)  // a number not kept is not used
+        return refuse(t, r->second.name,
+                      "no sequence number can be kept: " + sequence.error().message,
+                      plc::ErrorCode::kNotStored);
     Job job;
     job.trigger = t;
     job.setup = setup;
     job.triggered = Clock::now();
+    job.sequence = *sequence;
     {
         std::lock_guard lock(stats_mutex);
-        job.sequence = stats.next_sequence++;
         ++stats.triggers;
     }
     job.recipe = &r->second;
@@ -459,6 +473,54 @@ void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
     }
 }
 
+// A trigger refused before it becomes a part: no sequence number, no row; the PLC and the
+// journal get the reason.
+void Daemon::Impl::refuse(const plc::TriggerRequest& t, const std::string& recipe,
+                          const std::string& reason, plc::ErrorCode error) {
+    const std::string why = "part " + std::to_string(t.part_id) + ": " + reason + ": PLC fault " +
+                            std::to_string(code(error));
+    log_part({0, std::to_string(t.part_id), recipe, "FAULT", why, true});
+    board->event(why, true);
+    server->fault(code(error));
+    plant->refused(code(error));
+    std::lock_guard lock(stats_mutex);
+    ++stats.triggers;
+    ++stats.failed;
+}
+
+// The numbers used in `dir`: numbering goes on past them and past the files' last one.
+void Daemon::Impl::open_sequences(const fs::path& dir) {
+    auto r = results::SequenceReservation::open(dir);
+    if (!r) {
+        sequences.reset();
+        sequences_error = r.error().message;
+        spdlog::error("{}: parts fault 206 until it can be written", sequences_error);
+        return;
+    }
+    const std::uint64_t there = std::max(results::last_sequence(dir), r->reserved());
+    sequences.emplace(std::move(*r));
+    sequences_error.clear();
+    std::lock_guard lock(stats_mutex);
+    stats.next_sequence = std::max(stats.next_sequence, there + 1);
+}
+
+// The next part's number, kept before it is used: a part whose result never reaches the files,
+// or a crash during it, must not give it to the next part too. A number that could not be kept
+// is not taken.
+core::Result<std::uint64_t> Daemon::Impl::take_sequence() {
+    if (!sequences) open_sequences(setup->config.results.dir);  // the folder may be back
+    if (!sequences) return core::make_error(sequences_error);
+    std::uint64_t n = 0;
+    {
+        std::lock_guard lock(stats_mutex);
+        n = stats.next_sequence;
+    }
+    if (auto kept = sequences->reserve(n); !kept) return kept.error();
+    std::lock_guard lock(stats_mutex);
+    stats.next_sequence = n + 1;
+    return n;
+}
+
 void Daemon::Impl::apply_reload() {
     reload = false;
     const fs::path file = setup->config.file;
@@ -467,9 +529,13 @@ void Daemon::Impl::apply_reload() {
     if (!next) {
         spdlog::error("reload REJECTED, the running configuration is kept: {}",
                       next.error().message);
-        if (sup.status) sup.status("reload rejected: " + next.error().message);
-        std::lock_guard lock(stats_mutex);
-        ++stats.rejected_reloads;
+        {
+            std::lock_guard lock(stats_mutex);
+            ++stats.rejected_reloads;
+            reload_note = "reload rejected at " + core::iso8601_utc(core::realtime_ns()) + ": " +
+                          next.error().message;
+        }
+        publish_status();
         return;
     }
     const auto& a = setup->config;
@@ -486,10 +552,15 @@ void Daemon::Impl::apply_reload() {
         spdlog::warn("reload: the status page's address changes only at a restart");
     if (plant_settings(a) != plant_settings(b))
         spdlog::warn("reload: the MQTT broker and the metrics endpoint change only at a restart");
+    if (a.results.dir != b.results.dir) open_sequences(b.results.dir);  // numbering goes on
     setup = std::move(*next);
     spdlog::info("reloaded: config hash {}\n{}", setup->config.hash, describe(*setup));
-    std::lock_guard lock(stats_mutex);
-    ++stats.reloads;
+    {
+        std::lock_guard lock(stats_mutex);
+        ++stats.reloads;
+        reload_note.clear();
+    }
+    publish_status();
 }
 
 bool Daemon::Impl::healthy() const {
@@ -1077,7 +1148,11 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
     impl->sup = std::move(supervisor);
     const DaemonConfig& c = setup->config;
     impl->board = std::make_unique<StatusBoard>(c.results.dir, c.archive.dir);
-    impl->stats.next_sequence = results::last_sequence(c.results.dir) + 1;
+    // Numbering goes on after the highest number used (.sequence) or committed (the files); the
+    // PLC's input 5 starts at the last committed one.
+    const std::uint64_t committed = results::last_sequence(c.results.dir);
+    impl->stats.next_sequence = committed + 1;
+    impl->open_sequences(c.results.dir);
     if (c.accelerometer) {
         // Room for a whole part: every face, the moves and the margins, twice over.
         const double part_s = static_cast<double>(c.faces.size()) *
@@ -1099,7 +1174,7 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
         impl->pyrometer = std::move(*p);
     }
     plc::ServerConfig plc = c.plc;  // the PLC's count goes on from the results files
-    plc.first_sequence = static_cast<std::uint16_t>((impl->stats.next_sequence - 1) & 0xFFFF);
+    plc.first_sequence = static_cast<std::uint16_t>(committed & 0xFFFF);
     auto server = plc::Server::start(plc);
     if (!server) return server.error();
     impl->server = std::move(*server);

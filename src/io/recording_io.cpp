@@ -19,6 +19,7 @@
 
 #include "hotgauge/core/geometry.hpp"
 #include "hotgauge/io/npy.hpp"
+#include "hotgauge/io/yaml_reader.hpp"
 #include "hotgauge/io/yaml_writer.hpp"
 
 namespace hotgauge::io {
@@ -57,9 +58,10 @@ Result<YAML::Node> load_yaml(const fs::path& path) {
         return doc;
     } catch (const YAML::Exception& e) {
         if (e.mark.is_null()) return make_error(where(path) + "cannot read YAML: " + e.msg);
-        return make_error(where(path) + "YAML syntax error at line " +
-                          std::to_string(e.mark.line + 1) + ", column " +
-                          std::to_string(e.mark.column + 1) + ": " + e.msg);
+        const YamlSyntaxError at = yaml_syntax_error(path.string(), e);
+        return make_error(where(path) + "YAML syntax error at line " + std::to_string(at.line) +
+                          (at.column > 0 ? ", column " + std::to_string(at.column) : "") + ": " +
+                          at.message);
     }
 }
 

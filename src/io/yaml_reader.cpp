@@ -1,11 +1,85 @@
 #include "hotgauge/io/yaml_reader.hpp"
 
+#include <cctype>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <vector>
 
 #include "hotgauge/core/geometry.hpp"
 
 namespace hotgauge::io {
+
+namespace {
+
+// The line (0-based) of the last '[' or '{' opened on or before `error_line` that the whole text
+// never closes, comments and quoted scalars skipped; -1 when there is none (the collection is
+// closed and the mistake is inside it, where yaml-cpp says). yaml-cpp reports an unclosed flow
+// collection where it gave up looking for its end, a line or more after the mistake.
+int unclosed_flow_line(const std::string& text, int error_line) {
+    std::vector<int> open;  // the lines of the brackets still open
+    int line = 0;
+    char quote = 0;
+    char prev = '\n';  // the character just before
+    char last = '\n';  // the last one that is not a space ('\n': none yet on this line)
+    bool comment = false, escaped = false;
+    for (const char c : text) {
+        if (c == '\n') {
+            ++line, comment = false, prev = last = '\n';
+            if (quote == '\'') quote = 0;  // not valid YAML either way; do not run on
+            continue;
+        }
+        if (comment) continue;
+        if (quote) {
+            if (escaped)
+                escaped = false;
+            else if (quote == '"' && c == '\\')
+                escaped = true;
+            else if (c == quote)
+                quote = 0, last = c;
+            prev = c;
+            continue;
+        }
+        if (c == '#' && (prev == '\n' || prev == ' ' || prev == '\t')) {
+            comment = true;
+            continue;
+        }
+        // Where a scalar or a collection begins (in a flow collection after , [ { : too);
+        // elsewhere quotes and brackets are characters of a plain scalar ("it's [1").
+        const bool begins = std::strchr(open.empty() ? "\n:-?" : "\n:-?,[{", last) != nullptr;
+        if ((c == '"' || c == '\'') && begins)
+            quote = c;
+        else if ((c == '[' || c == '{') && begins)
+            open.push_back(line);
+        else if ((c == ']' || c == '}') && !open.empty())
+            open.pop_back();
+        if (!std::isspace(static_cast<unsigned char>(c))) last = c;
+        prev = c;
+    }
+    for (auto it = open.rbegin(); it != open.rend(); ++it)
+        if (*it <= error_line) return *it;
+    return -1;
+}
+
+}  // namespace
+
+YamlSyntaxError yaml_syntax_error(const std::string& file, const YAML::Exception& e) {
+    if (e.mark.is_null()) return {0, 0, e.msg};
+    YamlSyntaxError out{e.mark.line + 1, e.mark.column + 1, e.msg};
+    if (e.msg.find("flow not found") != std::string::npos) {  // an unclosed [ or {
+        std::ifstream in(file);
+        const std::string text((std::istreambuf_iterator<char>(in)),
+                               std::istreambuf_iterator<char>());
+        if (const int at = unclosed_flow_line(text, e.mark.line); at >= 0) {
+            out.message += " (the bracket opened on this line is not closed)";
+            out.line = at + 1;
+            out.column = 0;
+        }
+    }
+    return out;
+}
 
 YAML::Node YamlReader::load() const {
     std::error_code ec;  // a name too long, a symlink loop: an error here, never an exception
@@ -14,8 +88,9 @@ YAML::Node YamlReader::load() const {
     try {
         return YAML::LoadFile(file_);
     } catch (const YAML::Exception& e) {
-        throw YamlError(file_ + ":" + std::to_string(e.mark.line + 1) +
-                        ": YAML syntax error: " + e.msg);
+        const YamlSyntaxError where = yaml_syntax_error(file_, e);
+        throw YamlError(file_ + ":" + std::to_string(where.line) +
+                        ": YAML syntax error: " + where.message);
     }
 }
 

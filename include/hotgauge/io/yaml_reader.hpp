@@ -21,6 +21,16 @@ struct YamlError : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
+// Where a syntax error of `file` is: the line (1-based) and what yaml-cpp says. An unclosed '['
+// or '{' is reported at the line it was opened on (yaml-cpp names the line where it gave up
+// looking for its end, one or more later), with a note that says so.
+struct YamlSyntaxError {
+    int line = 0;  // 0: yaml-cpp gave no place
+    int column = 0;
+    std::string message;
+};
+YamlSyntaxError yaml_syntax_error(const std::string& file, const YAML::Exception& e);
+
 class YamlReader {
   public:
     explicit YamlReader(std::string file) : file_(std::move(file)) {}
