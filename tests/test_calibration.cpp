@@ -51,6 +51,27 @@ std::string text_of(const std::filesystem::path& p) {
     return s.str();
 }
 
+// A one-face recording ("top", one ray per profile, gravity on two accelerometer samples either
+// side of the profiles) for the geometry keys and their round trip through the files.
+hotgauge::core::Recording top_face_recording(std::vector<float> profiles_mm,
+                                             std::vector<std::int64_t> times_ns,
+                                             std::vector<double> positions_mm) {
+    hotgauge::core::Recording rec;
+    rec.part_id = "P1";
+    rec.recipe = "hub-a";
+    rec.captured_at = "2026-12-02T06:00:00Z";
+    hotgauge::core::FaceScan f;
+    f.name = "top";
+    f.width = 1;
+    f.profiles_mm = std::move(profiles_mm);
+    f.profile_times_ns = std::move(times_ns);
+    f.profile_positions_mm = std::move(positions_mm);
+    f.accel_mps2 = {0, 0, 9.81f, 0, 0, 9.81f};
+    f.accel_times_ns = {999'000'000, 1'002'000'000};
+    rec.faces.push_back(std::move(f));
+    return rec;
+}
+
 // The error reading `text` with `from` replaced by `to` ("" when it reads).
 std::string error_with(const std::string& from, const std::string& to) {
     hotgauge::test::TempDir tmp;
@@ -252,21 +273,12 @@ TEST(Calibration, ApplyGeometryReplacesFaceYamlAndScalesTheTravel) {
 TEST(Calibration, ApplyGeometryReplacesWhatTheCaptureApplied) {
     const calib::Calibration c = example();
     const auto& g = *c.face("top");
-    hotgauge::core::Recording rec;
-    rec.part_id = "P1";
-    rec.recipe = "hub-a";
-    rec.captured_at = "2026-12-02T06:00:00Z";
-    hotgauge::core::FaceScan f;
-    f.name = "top";
-    f.width = 1;
-    f.profiles_mm = {1.0f, 900.0f, 2.0f, 901.0f};
-    f.profile_times_ns = {1'000'000'000, 1'001'000'000};
-    f.profile_positions_mm = {0.0, 100.0 * g.travel_scale};
-    f.accel_mps2 = {0, 0, 9.81f, 0, 0, 9.81f};
-    f.accel_times_ns = {999'000'000, 1'002'000'000};
+    hotgauge::core::Recording rec =
+        top_face_recording({1.0f, 900.0f, 2.0f, 901.0f}, {1'000'000'000, 1'001'000'000},
+                           {0.0, 100.0 * g.travel_scale});
+    hotgauge::core::FaceScan& f = rec.faces[0];
     f.travel_scale = g.travel_scale;
     f.clock_offset_ns = c.clock_offset_ns;
-    rec.faces.push_back(f);
     hotgauge::test::TempDir dir;
     ASSERT_TRUE(hotgauge::io::write_recording(rec, dir.path / "rec").ok());
     auto back = hotgauge::io::read_recording(dir.path / "rec");
@@ -334,20 +346,8 @@ TEST(Calibration, ApplyGeometryCorrectsAHeadPlacedElsewhere) {
     // Written by this software with an older calibration in force: the new one replaces it.
     EXPECT_TRUE(applied(moved, true).isApprox(g.T_world_camera, 1e-12));
 
-    hotgauge::core::Recording rec;
-    rec.part_id = "P1";
-    rec.recipe = "hub-a";
-    rec.captured_at = "2026-12-07T00:00:00Z";
-    hotgauge::core::FaceScan f;
-    f.name = "top";
-    f.width = 1;
-    f.profiles_mm = {1.0f, 900.0f};
-    f.profile_times_ns = {1'000'000'000};
-    f.profile_positions_mm = {0.0};
-    f.accel_mps2 = {0, 0, 9.81f, 0, 0, 9.81f};
-    f.accel_times_ns = {999'000'000, 1'002'000'000};
-    f.geometry_from_calibration = true;
-    rec.faces.push_back(f);
+    hotgauge::core::Recording rec = top_face_recording({1.0f, 900.0f}, {1'000'000'000}, {0.0});
+    rec.faces[0].geometry_from_calibration = true;
     ASSERT_TRUE(hotgauge::io::write_recording(rec, tmp.path / "rec").ok());
     auto read = hotgauge::io::read_recording(tmp.path / "rec");
     ASSERT_TRUE(read.ok()) << read.error().message;

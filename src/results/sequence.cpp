@@ -74,25 +74,25 @@ SequenceReservation::~SequenceReservation() {
     if (fd_ >= 0) ::close(fd_);
 }
 
-core::Result<void> SequenceReservation::reserve(std::uint64_t n) {
+// Number n's line in place, synced: the bytes written, or -1 (errno says why).
+ssize_t SequenceReservation::put(std::uint64_t n) const {
     char line[kWidth + 2];
     std::snprintf(line, sizeof line, "%20llu\n", static_cast<unsigned long long>(n));
-    const ssize_t put = ::pwrite(fd_, line, kWidth + 1, 0);
-    if (put < 0 || ::fdatasync(fd_) != 0)
-        return core::make_error(path_.string() + ": " + std::strerror(errno));
-    if (put != static_cast<ssize_t>(kWidth + 1))  // the old line, partly overwritten: put it back
-        return core::make_error(path_.string() + ": only " + std::to_string(put) + " of " +
-                                std::to_string(kWidth + 1) + " bytes written" +
-                                (restore() ? "" : ", and the number before could not be put back"));
-    reserved_ = n;
-    return {};
+    const ssize_t written = ::pwrite(fd_, line, kWidth + 1, 0);
+    return written < 0 || ::fdatasync(fd_) != 0 ? -1 : written;
 }
 
-bool SequenceReservation::restore() const {
-    char line[kWidth + 2];
-    std::snprintf(line, sizeof line, "%20llu\n", static_cast<unsigned long long>(reserved_));
-    return ::pwrite(fd_, line, kWidth + 1, 0) == static_cast<ssize_t>(kWidth + 1) &&
-           ::fdatasync(fd_) == 0;
+core::Result<void> SequenceReservation::reserve(std::uint64_t n) {
+    constexpr auto kLine = static_cast<ssize_t>(kWidth + 1);
+    const ssize_t written = put(n);
+    if (written < 0) return core::make_error(path_.string() + ": " + std::strerror(errno));
+    if (written != kLine)  // the old line, partly overwritten: put it back
+        return core::make_error(
+            path_.string() + ": only " + std::to_string(written) + " of " + std::to_string(kLine) +
+            " bytes written" +
+            (put(reserved_) == kLine ? "" : ", and the number before could not be put back"));
+    reserved_ = n;
+    return {};
 }
 
 }  // namespace hotgauge::results

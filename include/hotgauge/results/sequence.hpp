@@ -4,6 +4,8 @@
 // measured, so that a number is never used twice: not after a part whose result never reached the
 // files (PLC fault 206, a full disk), nor after a crash during a part. The results files say
 // which numbers were committed; this file says which were used.
+#include <sys/types.h>
+
 #include <cstdint>
 #include <filesystem>
 #include <utility>
@@ -27,7 +29,7 @@ class SequenceReservation {
     core::Result<void> reserve(std::uint64_t n);
 
   private:
-    bool restore() const;  // the reserved number's line again, after a short write
+    ssize_t put(std::uint64_t n) const;  // n's line in place, synced
     SequenceReservation(int fd, std::filesystem::path path, std::uint64_t reserved)
         : fd_(fd), path_(std::move(path)), reserved_(reserved) {}
     int fd_ = -1;
