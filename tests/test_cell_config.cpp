@@ -351,6 +351,49 @@ TEST(ReasonBits, FromWhatTheMeasurementRecorded) {
     EXPECT_EQ(cell::feature_reasons(f, &check) & plc::reason::kMasterCheckFailed, 0);
 }
 
+// What the PLC was shown, kept in the results line, reads back the same (a part triggered again
+// after a crash is shown it again: docs/results.md "One commit per part").
+TEST(ShownToThePlc, KeptInTheResultsLineReadsBackTheSame) {
+    plc::PartResult p;
+    p.overall = plc::Verdict::kNok;
+    p.temperature_c = 1012.5;
+    p.reasons = plc::reason::kDegraded;
+    p.recipe_revision = 3;
+    p.features = {{"Diameter 1", 1, 138.0123, plc::Verdict::kNok, true, plc::DriftState::kUp,
+                   plc::reason::kOutsideTolerance},
+                  {"Height 2", 4, std::nullopt, plc::Verdict::kNotMeasured, false,
+                   plc::DriftState::kNone, plc::reason::kNotMeasured}};
+    const std::string line =
+        R"({"sequence":42,"time_ns":1795000000000000000,"plc":)" + cell::plc_json(p, 0) + "}";
+    const auto back = cell::plc_from_json(line);
+    ASSERT_TRUE(back.ok()) << back.error().message;
+    EXPECT_EQ(back->fault, 0);
+    EXPECT_EQ(back->result.overall, p.overall);
+    EXPECT_EQ(back->result.temperature_c, p.temperature_c);
+    EXPECT_EQ(back->result.reasons, p.reasons);
+    EXPECT_EQ(back->result.recipe_revision, 3);
+    EXPECT_EQ(back->result.sequence, 42u);
+    EXPECT_EQ(back->result.time_ns, 1795000000000000000);
+    ASSERT_EQ(back->result.features.size(), 2u);
+    for (std::size_t i = 0; i < 2; ++i) {
+        const auto &a = p.features[i], &b = back->result.features[i];
+        EXPECT_EQ(a.name, b.name);
+        EXPECT_EQ(a.slot, b.slot);
+        EXPECT_EQ(a.value_mm, b.value_mm);  // the same double, to the bit
+        EXPECT_EQ(a.verdict, b.verdict);
+        EXPECT_EQ(a.required, b.required);
+        EXPECT_EQ(a.drift, b.drift);
+        EXPECT_EQ(a.reasons, b.reasons);
+    }
+    EXPECT_EQ(
+        cell::plc_from_json(R"({"sequence":42,"time_ns":1,"plc":)" + cell::plc_json(p, 203) + "}")
+            ->fault,
+        203);
+    const auto old = cell::plc_from_json(R"({"sequence":42,"time_ns":1})");  // an older line
+    ASSERT_FALSE(old.ok());
+    EXPECT_NE(old.error().message.find("\"plc\""), std::string::npos) << old.error().message;
+}
+
 }  // namespace hotgauge
 
 // The journal's VERDICT field is what docs/operations.md tells a QE to filter on

@@ -205,6 +205,31 @@ TEST(Spool, FullyAcknowledgedEmptiesTheFile) {
     EXPECT_EQ(slurp(d.path / "spool.jsonl"), "y1\n");
 }
 
+// Where a writer goes on after a crash (the daemon's results, docs/plant-data.md): the newest
+// message appended, from the file while it has one, and kept aside once it is emptied.
+TEST(Spool, TheLastAppendedMessageOutlivesItsAcknowledgement) {
+    test::TempDir d;
+    {
+        auto s = open_spool(spool_config(d.path));
+        ASSERT_TRUE(s);
+        EXPECT_FALSE(s->last_appended()) << "never appended to";
+        const std::string big(10000, 'b');  // longer than one read block
+        for (const std::string m : {std::string("a1"), big}) ASSERT_TRUE(s->append(m).ok());
+        EXPECT_EQ(s->last_appended(), big);
+        ASSERT_TRUE(s->pop().ok());
+        EXPECT_EQ(s->last_appended(), big);
+        ASSERT_TRUE(s->pop().ok());  // emptied
+        EXPECT_EQ(fs::file_size(d.path / "spool.jsonl"), 0u);
+        EXPECT_EQ(s->last_appended(), big);
+        ASSERT_TRUE(s->append("c3").ok());
+        EXPECT_EQ(s->last_appended(), "c3");
+        ASSERT_TRUE(s->pop().ok());
+    }
+    auto s = open_spool(spool_config(d.path));
+    ASSERT_TRUE(s);
+    EXPECT_EQ(s->last_appended(), "c3");
+}
+
 // ---------------------------------------------------------------------------------------------
 // A real broker
 

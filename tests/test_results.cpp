@@ -6,11 +6,13 @@
 
 #include <cstdlib>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "hotgauge/io/recording_io.hpp"
 #include "hotgauge/results/archive.hpp"
+#include "hotgauge/results/read_back.hpp"
 #include "hotgauge/results/results_log.hpp"
 #include "hotgauge/results/sequence.hpp"
 #include "temp_dir.hpp"
@@ -62,6 +64,7 @@ TEST(ResultsLog, CsvOpensInASpreadsheetAndJsonLinesCarryEverything) {
     ASSERT_TRUE(log->append({kNoon, 41, &a, "0.1.0", "cfg1234", std::nullopt}).ok());
     results::ResultEntry eb{kNoon + 1'000'000'000, 42, &b, "0.1.0", "cfg1234", "archive/x"};
     eb.die_id = 7;
+    eb.remeasure_of = 17;  // measured again: its first measurement, number 17, never committed
     eb.drift = {
         {"Diameter 1", "DRIFT_UP"}, {"Diameter 2", "WATCHING"}, {"Diameter 3", "DRIFT_DOWN"}};
     ASSERT_TRUE(log->append(eb).ok());
@@ -71,7 +74,7 @@ TEST(ResultsLog, CsvOpensInASpreadsheetAndJsonLinesCarryEverything) {
     ASSERT_EQ(rows.size(), 3u);
     EXPECT_EQ(
         rows[0].rfind("time,time_utc,sequence,part_id,recipe,temperature_c,verdict,degraded,drift,"
-                      "Diameter 1 value_mm,Diameter 1 deviation_mm,Diameter 1 verdict,"
+                      "remeasure_of,Diameter 1 value_mm,Diameter 1 deviation_mm,Diameter 1 verdict,"
                       "Diameter 1 nominal_mm,Diameter 1 lower_limit_mm,Diameter 1 upper_limit_mm,"
                       "Diameter 1 reason,",
                       0),
@@ -83,12 +86,12 @@ TEST(ResultsLog, CsvOpensInASpreadsheetAndJsonLinesCarryEverything) {
         " -c \"import csv,sys; r=list(csv.reader(open(sys.argv[1]))); " +
         "assert all(len(x)==len(r[0]) for x in r), [len(x) for x in r]; " +
         "assert r[2][3]=='B,\\\"2\\\"', r[2][3]; " +
-        "assert r[1][9]=='60.0123' and r[1][16]=='' and r[1][18]=='NOT_MEASURED', r[1]; " +
-        "assert r[1][19]=='61.0000' and r[1][15]=='' and r[1][22].startswith('edge not found, "
+        "assert r[1][10]=='60.0123' and r[1][17]=='' and r[1][19]=='NOT_MEASURED', r[1]; " +
+        "assert r[1][20]=='61.0000' and r[1][16]=='' and r[1][23].startswith('edge not found, "
         "arc 12'), r[1]; " +
         "assert r[1][1].endswith('Z') and r[1][1][:4]=='2026', r[1][1]; " +
-        "assert r[1][8]=='' and r[2][8]=='Diameter 1 DRIFT_UP; Diameter 3 DRIFT_DOWN', r[2]\" " +
-        csv.string();
+        "assert r[1][8]=='' and r[2][8]=='Diameter 1 DRIFT_UP; Diameter 3 DRIFT_DOWN', r[2]; " +
+        "assert r[1][9]=='' and r[2][9]=='17', r[2]\" " + csv.string();
     EXPECT_EQ(std::system(check.c_str()), 0) << check;
 
     const auto js = lines(log->last_jsonl());
@@ -99,6 +102,8 @@ TEST(ResultsLog, CsvOpensInASpreadsheetAndJsonLinesCarryEverything) {
     EXPECT_EQ(j["archived_as"], "archive/x");
     EXPECT_EQ(j["die"], 7);
     EXPECT_EQ(j["drift"]["Diameter 2"], "WATCHING");
+    EXPECT_EQ(j["remeasure_of"], 17);
+    EXPECT_TRUE(nlohmann::json::parse(js[0])["remeasure_of"].is_null());
     EXPECT_EQ(j["part"]["part_id"], "B,\"2\"");
     EXPECT_EQ(j["part"]["features"][1]["reason"], "edge not found, arc 12° < 30°");
 }
@@ -247,6 +252,83 @@ TEST(ResultsLog, AMasterCheckIsAVerificationRow) {
     EXPECT_EQ(lines(log->last_csv()).size(), 2u);
 }
 
+// One commit per part (docs/results.md): a crash between a part's JSON line and its CSV row, or a
+// power cut that lost unsynced CSV rows, is completed from the JSON lines at the next open, each
+// row as the append would have written it, in order, once.
+TEST(ResultsLog, CsvRowsACrashLeftOutAreWrittenFromTheJsonLinesAtOpen) {
+    test::TempDir tmp;
+    const auto dir = tmp.path / "results";
+    const auto a = part("A-1", 3, 60.0), b = part("B-2", 4, 70.0), m = part("M-0001", 3, 60.0);
+    core::MasterCertificate cert;
+    cert.master = "M-0001";
+    cert.recipe = "hub-a";
+    cert.certified_at = "2026-11-20";
+    cert.features = {{"Diameter 1", 60.0123, 0.001, std::nullopt}};
+    auto v = pipeline::verify(m, cert);
+    ASSERT_TRUE(v.ok()) << v.error().message;
+    std::map<std::filesystem::path, std::vector<std::string>> whole;  // every CSV, all parts in
+    {
+        auto log = results::ResultsLog::open({dir, false});
+        ASSERT_TRUE(log.ok());
+        EXPECT_TRUE(log->completed_at_open().empty());
+        for (std::uint64_t seq = 1; seq <= 6; ++seq) {
+            // hub-a, hub-a, hub-b (its own file), a master check, hub-a, hub-b
+            const auto* r = seq == 3 || seq == 6 ? &b : seq == 4 ? &m : &a;
+            results::ResultEntry e{kNoon + static_cast<std::int64_t>(seq) * 1'000'000'000,
+                                   seq,
+                                   r,
+                                   "v",
+                                   "h",
+                                   std::nullopt};
+            if (seq == 4) e.verification = &*v;
+            e.drift = {{"Diameter 3", "DRIFT_UP"}, {"Diameter 1", "DRIFT_DOWN"}};
+            ASSERT_TRUE(log->append(e).ok());
+            EXPECT_EQ(results::csv_row_of_line(log->last_line()),
+                      seq == 4 ? results::verification_csv_row(e) : results::csv_row(e));
+        }
+        for (const auto& f : std::filesystem::directory_iterator(dir))
+            if (f.path().extension() == ".csv") whole[f.path()] = lines(f.path());
+    }
+    ASSERT_EQ(whole.size(), 3u);  // the day's, hub-b's and the verification file
+    // The drift cell in the recipe's feature order, as the entry gave it before it was a line.
+    EXPECT_NE(whole.at(dir / (results::local_date(kNoon) + ".csv"))[1].find(
+                  ",Diameter 1 DRIFT_DOWN; Diameter 3 DRIFT_UP,"),
+              std::string::npos);
+    // The crash: sequences 4..6 never reached their CSV files (3 and 2 rows cut off the end, one
+    // a torn half row), then the next start.
+    const auto cut = [&](const std::filesystem::path& file, std::size_t keep, bool torn) {
+        std::ofstream out(file, std::ios::trunc);
+        for (std::size_t i = 0; i < keep; ++i) out << whole.at(file)[i] << "\n";
+        if (torn) out << whole.at(file)[keep].substr(0, 20);
+    };
+    const auto day = dir / (results::local_date(kNoon) + ".csv");
+    const auto hub_b = dir / (results::local_date(kNoon) + ".hub-b.csv");
+    const auto checks = dir / (results::local_date(kNoon) + ".verification.csv");
+    cut(day, 3, true);      // header, 1, 2 (5 lost, a torn start of it left)
+    cut(hub_b, 2, false);   // header, 3 (6 lost)
+    cut(checks, 1, false);  // header (4 lost)
+    auto again = results::ResultsLog::open({dir, false});
+    ASSERT_TRUE(again.ok());
+    EXPECT_EQ(again->completed_at_open(), (std::vector<std::uint64_t>{4, 5, 6}));
+    for (const auto& [file, rows] : whole) EXPECT_EQ(lines(file), rows) << file;
+    // Opened once more: nothing is owed, nothing written twice.
+    auto third = results::ResultsLog::open({dir, false});
+    ASSERT_TRUE(third.ok());
+    EXPECT_TRUE(third->completed_at_open().empty());
+    for (const auto& [file, rows] : whole) EXPECT_EQ(lines(file), rows) << file;
+}
+
+TEST(ResultsLog, TheLastResultLinesSpanDayFilesAndLeaveATornLineOut) {
+    test::TempDir tmp;
+    std::ofstream(tmp.path / "2026-12-01.jsonl") << "{\"sequence\":1}\n{\"sequence\":2}\n";
+    std::ofstream(tmp.path / "2026-12-02.jsonl") << "{\"sequence\":3}\n{\"sequence\":4}\n{\"seq";
+    EXPECT_EQ(
+        results::last_result_lines(tmp.path, 3),
+        (std::vector<std::string>{"{\"sequence\":2}", "{\"sequence\":3}", "{\"sequence\":4}"}));
+    EXPECT_EQ(results::last_result_lines(tmp.path, 10).size(), 4u);
+    EXPECT_TRUE(results::last_result_lines(tmp.path / "none", 10).empty());
+}
+
 core::Recording small_recording(const std::string& id) {
     core::Recording rec;
     rec.part_id = id;
@@ -310,6 +392,50 @@ TEST(RawArchive, KeepsBadPartsAndEveryNthOkWithinItsQuotaOldestFirst) {
     EXPECT_EQ(stored[4].filename().string(), "000000000005_P_5");  // a safe folder name
 }
 
+// The archive follows the commit: a recording is under its final name only once whole, and a
+// committed line naming a folder a crash never wrote gets that folder with a note saying so,
+// which `hotgauge report part --results` reads back as the reason.
+TEST(RawArchive, AFolderACrashNeverWroteIsSaidSoAtTheNextStart) {
+    test::TempDir tmp;
+    auto archive = results::RawArchive::open({tmp.path / "archive", 1ull << 30, 1});
+    ASSERT_TRUE(archive.ok());
+    auto stored = archive->store(small_recording("P-1"), 1, kNoon);
+    ASSERT_TRUE(stored.ok()) << stored.error().message;
+    auto leftover = *stored;
+    leftover += ".partial";
+    EXPECT_FALSE(std::filesystem::exists(leftover));
+    // Part 2's line was committed, then the daemon died while writing its recording.
+    const auto lost = archive->folder("P-2", 2, kNoon);
+    std::filesystem::create_directories(lost.string() + ".partial");
+    std::ofstream(lost.string() + ".partial/manifest.yaml") << "format: hotgauge-re";
+    const auto results_dir = tmp.path / "results";
+    std::filesystem::create_directories(results_dir);
+    std::vector<std::string> committed;
+    for (auto [seq, where] : {std::pair{1, *stored}, std::pair{2, lost}}) {
+        nlohmann::json j{{"sequence", seq},
+                         {"time", "2026-11-18T12:00:00.000+00:00"},
+                         {"archived_as", where.string()},
+                         {"part", {{"part_id", "P-" + std::to_string(seq)}}}};
+        committed.push_back(j.dump());
+    }
+    committed.push_back(R"({"sequence":3,"archived_as":null})");  // not archived: nothing to do
+    std::ofstream(results_dir / "2026-11-18.jsonl") << committed[0] << "\n"
+                                                    << committed[1] << "\n"
+                                                    << committed[2] << "\n";
+    EXPECT_EQ(archive->complete(committed), (std::vector<std::filesystem::path>{lost}));
+    EXPECT_FALSE(std::filesystem::exists(lost.string() + ".partial"));
+    EXPECT_TRUE(std::filesystem::exists(lost / results::RawArchive::kNotArchived));
+    EXPECT_TRUE(io::read_recording(*stored).ok());  // the whole one untouched
+    auto back = results::archived_recording(results_dir, 2);
+    ASSERT_FALSE(back.ok());
+    EXPECT_NE(back.error().message.find("2026-11-18.jsonl:2: part sequence 2 has no recording"),
+              std::string::npos)
+        << back.error().message;
+    EXPECT_NE(back.error().message.find("hotgauged stopped"), std::string::npos);
+    EXPECT_TRUE(results::archived_recording(results_dir, 1).ok());
+    EXPECT_TRUE(archive->complete(committed).empty()) << "said once";
+}
+
 TEST(ResultsLog, TheLastSequenceComesFromTheNewestDaysLastWholeLine) {
     test::TempDir tmp;
     EXPECT_EQ(results::last_sequence(tmp.path / "none"), 0u) << "no folder: start at 1";
@@ -341,13 +467,26 @@ TEST(SequenceReservation, KeepsTheHighestNumberUsedAcrossReopeningAndAFullDisk) 
         auto s = results::SequenceReservation::open(tmp.path);
         ASSERT_TRUE(s.ok()) << s.error().message;
         EXPECT_EQ(s->reserved(), 0u);
-        ASSERT_TRUE(s->reserve(41).ok());
-        ASSERT_TRUE(s->reserve(42).ok());
+        EXPECT_TRUE(s->last().clean_stop);
+        ASSERT_TRUE(s->reserve(41, 7001, 1).ok());
+        ASSERT_TRUE(s->reserve(42, 4294967295u, 65535).ok());
+    }
+    {
+        // Killed after reserving: the next start knows which part that was.
+        auto s = results::SequenceReservation::open(tmp.path);
+        ASSERT_TRUE(s.ok());
+        EXPECT_EQ(s->reserved(), 42u);
+        EXPECT_EQ(s->last().part_id, 4294967295u);
+        EXPECT_EQ(s->last().slot, 65535);
+        EXPECT_FALSE(s->last().clean_stop);
+        ASSERT_TRUE(s->stopped().ok());
     }
     {
         auto s = results::SequenceReservation::open(tmp.path);
         ASSERT_TRUE(s.ok());
         EXPECT_EQ(s->reserved(), 42u);
+        EXPECT_TRUE(s->last().clean_stop) << "stopped cleanly";
+        EXPECT_EQ(s->last().part_id, 4294967295u);
         // A full disk (no file may grow past its size): the number is written in place.
         signal(SIGXFSZ, SIG_IGN);
         rlimit old{};
@@ -361,6 +500,11 @@ TEST(SequenceReservation, KeepsTheHighestNumberUsedAcrossReopeningAndAFullDisk) 
         EXPECT_TRUE(kept.ok()) << kept.error().message;
     }
     EXPECT_EQ(results::SequenceReservation::open(tmp.path)->reserved(), 18446744073709551615ull);
+    std::ofstream(tmp.path / ".sequence") << "                  17\n";  // the first format
+    EXPECT_EQ(results::SequenceReservation::open(tmp.path)->last().sequence, 17u);
+    EXPECT_TRUE(results::SequenceReservation::open(tmp.path)->last().clean_stop);
+    std::ofstream(tmp.path / ".sequence") << "17 7001 1 X\n";
+    EXPECT_FALSE(results::SequenceReservation::open(tmp.path).ok()) << "no such state";
     std::ofstream(tmp.path / ".sequence") << "forty-two\n";
     const auto bad = results::SequenceReservation::open(tmp.path);
     ASSERT_FALSE(bad.ok());

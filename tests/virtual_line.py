@@ -447,7 +447,8 @@ status_page: {{bind_address: 127.0.0.1, port: 0}}
             self.notify.sock.close()
             os.unlink(path)
         self.notify = NotifySocket(path)
-        env = {"NOTIFY_SOCKET": self.notify.path, "WATCHDOG_USEC": str(WATCHDOG_S * 1_000_000)}
+        env = {"NOTIFY_SOCKET": self.notify.path, "WATCHDOG_USEC": str(WATCHDOG_S * 1_000_000),
+               **getattr(self, "daemon_env", {})}
         self.daemon = Process("hotgauged", [os.path.join(self.bin_dir, "src/daemon/hotgauged"),
                                             "--config", self.config_path], self.workdir, env)
         self.procs.append(self.daemon)

@@ -7,6 +7,7 @@
 #include <deque>
 #include <functional>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
 #include <thread>
@@ -197,6 +198,17 @@ struct Job {
     std::shared_ptr<const Setup> setup;
     const core::Recipe* recipe = nullptr;
     std::vector<std::string> faces;
+    std::optional<std::uint64_t> remeasure_of;  // the number its first measurement lost
+};
+
+// A part a crash or a FAULT 206 left unfinished (docs/results.md "One commit per part"): when the
+// PLC triggers it again, a committed result is shown again, else it is measured under a new number
+// that names the lost one.
+struct Unfinished {
+    std::uint64_t sequence = 0;
+    std::uint32_t part_id = 0;
+    std::uint16_t slot = 0;
+    std::string committed_line;  // its results line, when it committed
 };
 
 // Why a part could not be scanned: the PLC's fault code and the reason.
@@ -281,9 +293,12 @@ struct Daemon::Impl {
     std::optional<results::SequenceReservation> sequences;
     std::string sequences_error;
     void open_sequences(const fs::path& dir);
-    core::Result<std::uint64_t> take_sequence();
+    core::Result<std::uint64_t> take_sequence(std::uint32_t part_id, std::uint16_t slot);
     void refuse(const plc::TriggerRequest& t, const std::string& recipe, const std::string& reason,
                 plc::ErrorCode error);
+    std::optional<Unfinished> unfinished;  // under stats_mutex
+    void find_unfinished(const fs::path& dir);
+    bool show_again(const plc::TriggerRequest& t, const Unfinished& u);
 
     static std::int64_t steady_ns() {
         return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
@@ -342,8 +357,10 @@ struct Daemon::Impl {
     void process(Captured c);
     pipeline::PartResult measure_captured(Captured& c) const;
     // The registers: the result, or the fault; returns the outcome for the log.
+    plc::PartResult shown_to_plc(const Captured& c, const results::ResultEntry& entry) const;
     std::string publish(const Captured& c, const results::ResultEntry& entry,
-                        const core::Result<void>& stored, bool& problem);
+                        const core::Result<void>& stored, const plc::PartResult& shown,
+                        bool& problem);
     void prepare_results(const std::shared_ptr<const Setup>& s);
     PartMetrics part_metrics(const Captured& c, const pipeline::PartResult& r, bool stored) const;
 };
@@ -447,7 +464,14 @@ void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
         return refuse(t, "slot " + std::to_string(t.recipe_slot),
                       "no recipe in slot " + std::to_string(t.recipe_slot),
                       plc::ErrorCode::kUnknownRecipe);
-    const auto sequence = take_sequence();
+    std::optional<Unfinished> before;
+    {
+        std::lock_guard lock(stats_mutex);
+        before.swap(unfinished);  // only the next trigger can be that part again
+    }
+    const bool same_part = before && before->part_id == t.part_id && before->slot == t.recipe_slot;
+    if (same_part && !before->committed_line.empty() && show_again(t, *before)) return;
+    const auto sequence = take_sequence(t.part_id, t.recipe_slot);
     if (!sequence)  // a number not kept is not used
         return refuse(t, r->second.name,
                       "no sequence number can be kept: " + sequence.error().message,
@@ -457,6 +481,7 @@ void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
     job.setup = setup;
     job.triggered = Clock::now();
     job.sequence = *sequence;
+    if (same_part && before->committed_line.empty()) job.remeasure_of = before->sequence;
     {
         std::lock_guard lock(stats_mutex);
         ++stats.triggers;
@@ -488,6 +513,61 @@ void Daemon::Impl::refuse(const plc::TriggerRequest& t, const std::string& recip
     ++stats.failed;
 }
 
+// The part the last run had numbered when it died (no clean stop after it), and whether its
+// result committed (it is then the results files' last line).
+void Daemon::Impl::find_unfinished(const fs::path& dir) {
+    if (!sequences) return;
+    const auto& last = sequences->last();
+    if (last.clean_stop || last.sequence == 0) return;
+    Unfinished u{last.sequence, last.part_id, last.slot, {}};
+    const auto lines = results::last_result_lines(dir, 1);
+    if (!lines.empty()) {
+        const auto j = nlohmann::json::parse(lines.back(), nullptr, false);
+        if (j.is_object() && j.value("sequence", std::uint64_t{0}) == last.sequence)
+            u.committed_line = lines.back();
+    }
+    spdlog::warn(
+        "the last run stopped during or after part {} (seq {}), whose result {}; if the "
+        "PLC triggers it again, {}",
+        u.part_id, u.sequence, u.committed_line.empty() ? "never committed" : "committed",
+        u.committed_line.empty() ? "it is measured under a new number"
+                                 : "that result is shown again");
+    std::lock_guard lock(stats_mutex);
+    unfinished = std::move(u);
+}
+
+// A part whose result committed before a crash, triggered again: the PLC is shown that result
+// (its sequence, values and verdicts, as kept in the line), nothing is measured or written.
+// False, and the part is measured, when that result was a fault (the PLC triggers again to have
+// it measured) or the line does not say what the PLC was shown (written before this was kept).
+bool Daemon::Impl::show_again(const plc::TriggerRequest& t, const Unfinished& u) {
+    auto shown = plc_from_json(u.committed_line);
+    if (!shown || shown->fault) {
+        spdlog::warn("part {} seq {}: its committed result {}; measured again", t.part_id,
+                     u.sequence,
+                     shown ? "was FAULT " + std::to_string(shown->fault)
+                           : "cannot be shown again (" + shown.error().message + ")");
+        return false;
+    }
+    std::string outcome;
+    if (auto ok = server->finish(t.trigger_id, shown->result); !ok) {
+        outcome = "not published: " + ok.error().message;
+    } else {
+        outcome = plc::to_string(shown->result.overall);
+    }
+    const auto j = nlohmann::json::parse(u.committed_line);
+    const std::string recipe = j.at("part").value("recipe", std::string());
+    log_part({u.sequence, std::to_string(t.part_id), recipe, plc::to_string(shown->result.overall),
+              "part " + std::to_string(t.part_id) + " seq " + std::to_string(u.sequence) +
+                  " triggered again after a restart: its result had committed before the "
+                  "restart and is shown again, not measured again: " +
+                  outcome,
+              false});
+    std::lock_guard lock(stats_mutex);
+    ++stats.triggers;
+    return true;
+}
+
 // The numbers used in `dir`: numbering goes on past them and past the files' last one.
 void Daemon::Impl::open_sequences(const fs::path& dir) {
     auto r = results::SequenceReservation::open(dir);
@@ -507,7 +587,7 @@ void Daemon::Impl::open_sequences(const fs::path& dir) {
 // The next part's number, kept before it is used: a part whose result never reaches the files,
 // or a crash during it, must not give it to the next part too. A number that could not be kept
 // is not taken.
-core::Result<std::uint64_t> Daemon::Impl::take_sequence() {
+core::Result<std::uint64_t> Daemon::Impl::take_sequence(std::uint32_t part_id, std::uint16_t slot) {
     if (!sequences) open_sequences(setup->config.results.dir);  // the folder may be back
     if (!sequences) return core::make_error(sequences_error);
     std::uint64_t n = 0;
@@ -515,7 +595,7 @@ core::Result<std::uint64_t> Daemon::Impl::take_sequence() {
         std::lock_guard lock(stats_mutex);
         n = stats.next_sequence;
     }
-    if (auto kept = sequences->reserve(n); !kept) return kept.error();
+    if (auto kept = sequences->reserve(n, part_id, slot); !kept) return kept.error();
     std::lock_guard lock(stats_mutex);
     stats.next_sequence = n + 1;
     return n;
@@ -589,6 +669,8 @@ void Daemon::Impl::shutdown() {
     if (acquisition_thread.joinable()) acquisition_thread.join();
     if (processing_thread.joinable()) processing_thread.join();
     if (accel) accel->stop();
+    if (sequences && in_flight == 0)  // no part left unfinished: the next start need not ask
+        if (auto ok = sequences->stopped(); !ok) spdlog::warn("{}", ok.error().message);
     web.reset();    // the page shows the state up to the last part
     plant.reset();  // the broker is told "offline"; what is spooled stays for the next start
 }
@@ -890,9 +972,11 @@ void Daemon::Impl::prepare_results(const std::shared_ptr<const Setup>& s) {
         log.emplace(std::move(*l));
         log_error.clear();
     }
-    if (auto a = results::RawArchive::open(s->config.archive); a)
+    if (auto a = results::RawArchive::open(s->config.archive); a) {
         archive.emplace(std::move(*a));
-    else
+        archive->complete(
+            results::last_result_lines(s->config.results.dir, results::ResultsLog::kRecoverLines));
+    } else
         spdlog::error("raw archive: {}", a.error().message);
     quality.emplace(s->config.results.dir, s->config.quality);
     quality->load(core::realtime_ns());
@@ -975,8 +1059,26 @@ pipeline::PartResult Daemon::Impl::measure_captured(Captured& c) const {
     return r;
 }
 
+// What the PLC is shown for a measured part: values, verdicts, reasons, the drift watch's state.
+plc::PartResult Daemon::Impl::shown_to_plc(const Captured& c,
+                                           const results::ResultEntry& entry) const {
+    const Job& job = c.job;
+    plc::PartResult shown = to_plc(*entry.result, entry.verification);
+    set_drift(shown, entry.drift);
+    shown.sequence = job.sequence;
+    shown.time_ns = entry.time_ns;
+    if (auto rev = job.setup->recipe_revision.find(job.trigger.recipe_slot);
+        rev != job.setup->recipe_revision.end())
+        shown.recipe_revision = rev->second;
+    if (!c.left_out.empty()) shown.reasons |= plc::reason::kFaceMissing;
+    if (!accel || !job.setup->config.pipeline.compensate)
+        shown.reasons |= plc::reason::kNotCompensated;
+    return shown;
+}
+
 std::string Daemon::Impl::publish(const Captured& c, const results::ResultEntry& entry,
-                                  const core::Result<void>& stored, bool& problem) {
+                                  const core::Result<void>& stored, const plc::PartResult& shown,
+                                  bool& problem) {
     const Job& job = c.job;
     const pipeline::PartResult& r = *entry.result;
     const pipeline::Verification* check = entry.verification;
@@ -997,17 +1099,7 @@ std::string Daemon::Impl::publish(const Captured& c, const results::ResultEntry&
         return "FAULT " + std::to_string(c.fault) + " (" +
                plc::to_string(static_cast<plc::ErrorCode>(c.fault)) + "): " + c.failure;
     }
-    plc::PartResult published = to_plc(r, check);
-    set_drift(published, entry.drift);
-    published.sequence = job.sequence;
-    published.time_ns = entry.time_ns;
-    if (auto rev = job.setup->recipe_revision.find(job.trigger.recipe_slot);
-        rev != job.setup->recipe_revision.end())
-        published.recipe_revision = rev->second;
-    if (!c.left_out.empty()) published.reasons |= plc::reason::kFaceMissing;
-    if (!accel || !job.setup->config.pipeline.compensate)
-        published.reasons |= plc::reason::kNotCompensated;
-    if (auto ok = server->finish(job.trigger.trigger_id, published); !ok)
+    if (auto ok = server->finish(job.trigger.trigger_id, shown); !ok)
         return verdict_text(r, check) + ", not published: " + ok.error().message;
     problem = r.measurement.verdict != measure::Verdict::kOk || r.degraded;
     {
@@ -1069,12 +1161,15 @@ void Daemon::Impl::process(Captured c) {
     entry.software_version = HOTGAUGE_VERSION;
     entry.config_hash = job.setup->config.hash;
     entry.die_id = job.trigger.die_id;
+    entry.remeasure_of = job.remeasure_of;
     if (auto h = job.setup->result_hash.find(job.trigger.recipe_slot);
         h != job.setup->result_hash.end())
         entry.result_hash = h->second;
     if (quality && !is_master && !c.fault) entry.drift = quality->observe(entry.die_id, r);
     // The raw recording is written after the registers (it is large, and the PLC is waiting);
     // the results line names the folder it goes to, and a failure to write it is logged.
+    const plc::PartResult shown = shown_to_plc(c, entry);
+    entry.plc = plc_json(shown, c.fault);  // kept in the commit, to be shown again after a crash
     const bool archiving = !c.fault && archive && archive->wants(r, job.sequence);
     if (archiving)
         entry.archived_as = archive->folder(c.rec.part_id, job.sequence, t_result).string();
@@ -1085,15 +1180,18 @@ void Daemon::Impl::process(Captured c) {
         std::lock_guard lock(stats_mutex);
         store_error = stored ? "" : stored.error().message;
     }
-    if (!stored)
+    if (!stored) {
         spdlog::error("seq {}: results NOT stored: {}; the result is only in this log: {}",
                       job.sequence, stored.error().message, pipeline::to_json(r));
+        std::lock_guard lock(stats_mutex);  // triggered again, it is measured again, said so
+        unfinished = Unfinished{job.sequence, job.trigger.part_id, job.trigger.recipe_slot, {}};
+    }
 
     // Registers last: a result the PLC can acknowledge is already on disk.
     bool problem = true;
-    const std::string outcome = publish(c, entry, stored, problem);
+    const std::string outcome = publish(c, entry, stored, shown, problem);
     const std::int64_t published = core::realtime_ns();
-    if (archiving) {
+    if (archiving && stored) {  // the archive follows from the commit
         if (auto where = archive->store(c.rec, job.sequence, t_result); !where)
             spdlog::error("seq {}: raw archive: {} (the results line names {})", job.sequence,
                           where.error().message, *entry.archived_as);
@@ -1122,12 +1220,17 @@ void Daemon::Impl::process(Captured c) {
                             to_plc(r, verification ? &*verification : nullptr).overall),
               msg.str(), problem});
     // Last: the stats and the log above are the part's outcome, the pages can wait.
-    PartNews news{results::jsonl_line(entry), outcome, msg.str(),   problem,
-                  web ? &c.rec : nullptr,     {},      std::nullopt};
+    PartNews news{stored ? log->last_line() : results::jsonl_line(entry),
+                  outcome,
+                  msg.str(),
+                  problem,
+                  web ? &c.rec : nullptr,
+                  {},
+                  std::nullopt};
     if (stored) news.files = {log->last_csv(), log->last_jsonl()};
-    if (archiving) news.archived = fs::path(*entry.archived_as);
+    if (archiving && stored) news.archived = fs::path(*entry.archived_as);
     if (quality && stored) quality->stored(news.jsonl_line, t_result);
-    plant->result(news.jsonl_line, job.sequence);
+    if (stored) plant->result(news.jsonl_line, job.sequence);  // the plant gets what committed
     plant->part(part_metrics(c, r, static_cast<bool>(stored)));
     board->part(news);
 }
@@ -1153,6 +1256,11 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
     const std::uint64_t committed = results::last_sequence(c.results.dir);
     impl->stats.next_sequence = committed + 1;
     impl->open_sequences(c.results.dir);
+    impl->find_unfinished(c.results.dir);
+    // What a crash left half done (a CSV row, an archive folder) is completed before the PLC is
+    // served (docs/results.md "One commit per part"); the plant spool's share when it starts.
+    impl->prepare_results(setup);
+    if (!impl->log) spdlog::error("results: {}", impl->log_error);
     if (c.accelerometer) {
         // Room for a whole part: every face, the moves and the margins, twice over.
         const double part_s = static_cast<double>(c.faces.size()) *
@@ -1193,8 +1301,6 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
     else if (const auto took = std::chrono::duration_cast<milliseconds>(Clock::now() - opening);
              took > milliseconds(500))  // after a crash: the old control channel had to expire
         spdlog::info("camera {}: opened in {} ms", c.acquisition.camera.id, took.count());
-    impl->prepare_results(setup);
-    if (!impl->log) spdlog::error("results: {}", impl->log_error);
     impl->start_status_page();
     impl->plant = std::make_unique<PlantFeed>(c, impl->ring.get());
     impl->acq_beat = impl->proc_beat = Impl::steady_ns();

@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "hotgauge/core/clock.hpp"
+#include "hotgauge/results/results_log.hpp"
 
 namespace hotgauge::cell {
 namespace {
@@ -48,6 +49,7 @@ PlantFeed::PlantFeed(const DaemonConfig& config, const accel::AccelRing* ring) :
             spdlog::error("MQTT: {}: results go only to the PLC and the files", mqtt_problem_);
         else
             spdlog::info("MQTT: publishing to {} under {}", broker_, mqtt_->topic("#"));
+        if (mqtt_) catch_up(config.results.dir);
     }
     if (config.metrics.enabled) {
         web::ServerConfig wc;
@@ -118,6 +120,34 @@ bool PlantFeed::result(const std::string& jsonl_line, std::uint64_t sequence) {
         return false;
     }
     return true;
+}
+
+// After a crash between a part's commit and its spooling: the committed results after the
+// spool's newest, spooled now and in order (docs/plant-data.md "Nothing lost"). A spool never
+// written to starts with the next part.
+void PlantFeed::catch_up(const std::filesystem::path& results_dir) {
+    const auto sequence = [](const std::string& line) -> std::optional<std::uint64_t> {
+        const auto j = nlohmann::json::parse(line, nullptr, false);
+        if (!j.is_object() || !j.contains("sequence") || !j["sequence"].is_number_unsigned())
+            return std::nullopt;
+        return j["sequence"].get<std::uint64_t>();
+    };
+    const auto newest = mqtt_->last_result();
+    const auto after = newest ? sequence(*newest) : std::nullopt;
+    if (!after) return;
+    std::vector<std::uint64_t> spooled;
+    for (const auto& line :
+         results::last_result_lines(results_dir, results::ResultsLog::kRecoverLines)) {
+        const auto n = sequence(line);
+        if (!n || *n <= *after) continue;
+        if (!result(line, *n)) break;  // refused: said, and the order kept
+        spooled.push_back(*n);
+    }
+    if (!spooled.empty())
+        spdlog::warn(
+            "MQTT: spooled sequences {}..{} ({} results) from the results files: the "
+            "daemon had stopped after committing them, before spooling",
+            spooled.front(), spooled.back(), spooled.size());
 }
 
 void PlantFeed::part(const PartMetrics& p) {

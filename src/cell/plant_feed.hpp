@@ -5,6 +5,7 @@
 // start is logged and shown in the health, and the cell measures on without it.
 // Thread safety: every member may be called from any of the daemon's threads.
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -52,6 +53,7 @@ class PlantFeed {
   private:
     void declare();
     void refresh_gauges();
+    void catch_up(const std::filesystem::path& results_dir);
 
     plant::Metrics metrics_;
     std::unique_ptr<plant::Publisher> mqtt_;

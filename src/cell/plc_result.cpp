@@ -1,6 +1,7 @@
 #include "plc_result.hpp"
 
 #include <algorithm>
+#include <nlohmann/json.hpp>
 
 namespace hotgauge::cell {
 
@@ -82,6 +83,57 @@ void set_drift(plc::PartResult& p, const std::vector<std::pair<std::string, std:
                           : state == "DRIFT_DOWN" ? plc::DriftState::kDown
                           : state == "WATCHING"   ? plc::DriftState::kWatching
                                                   : plc::DriftState::kNone;
+}
+
+std::string plc_json(const plc::PartResult& p, std::uint16_t fault) {
+    nlohmann::json j;
+    j["fault"] = fault;
+    j["overall"] = static_cast<int>(p.overall);
+    j["temperature_c"] = p.temperature_c ? nlohmann::json(*p.temperature_c) : nlohmann::json();
+    j["reasons"] = p.reasons;
+    j["recipe_revision"] = p.recipe_revision;
+    j["features"] = nlohmann::json::array();
+    for (const auto& f : p.features)
+        j["features"].push_back(
+            {{"name", f.name},
+             {"slot", f.slot},
+             {"value_mm", f.value_mm ? nlohmann::json(*f.value_mm) : nlohmann::json()},
+             {"verdict", static_cast<int>(f.verdict)},
+             {"required", f.required},
+             {"drift", static_cast<int>(f.drift)},
+             {"reasons", f.reasons}});
+    return j.dump();
+}
+
+core::Result<PlcShown> plc_from_json(const std::string& results_line) {
+    try {
+        const auto line = nlohmann::json::parse(results_line);
+        const auto& j = line.at("plc");
+        PlcShown out;
+        out.fault = j.at("fault").get<std::uint16_t>();
+        plc::PartResult& p = out.result;
+        p.overall = static_cast<plc::Verdict>(j.at("overall").get<std::uint16_t>());
+        if (j.at("temperature_c").is_number()) p.temperature_c = j["temperature_c"].get<double>();
+        p.reasons = j.at("reasons").get<std::uint16_t>();
+        p.recipe_revision = j.at("recipe_revision").get<std::uint16_t>();
+        p.sequence = line.at("sequence").get<std::uint64_t>();
+        p.time_ns = line.at("time_ns").get<std::int64_t>();
+        for (const auto& f : j.at("features")) {
+            plc::FeatureValue v;
+            v.name = f.at("name").get<std::string>();
+            v.slot = f.at("slot").get<int>();
+            if (f.at("value_mm").is_number()) v.value_mm = f["value_mm"].get<double>();
+            v.verdict = static_cast<plc::Verdict>(f.at("verdict").get<std::uint16_t>());
+            v.required = f.at("required").get<bool>();
+            v.drift = static_cast<plc::DriftState>(f.at("drift").get<std::uint16_t>());
+            v.reasons = f.at("reasons").get<std::uint8_t>();
+            p.features.push_back(std::move(v));
+        }
+        if (auto ok = plc::check_result(p); !out.fault && !ok) return ok.error();
+        return out;
+    } catch (const nlohmann::json::exception& e) {
+        return core::make_error(std::string("the results line's \"plc\": ") + e.what());
+    }
 }
 
 std::string verdict_text(const pipeline::PartResult& r, const pipeline::Verification* check) {

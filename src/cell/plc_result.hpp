@@ -22,6 +22,16 @@ plc::PartResult to_plc(const pipeline::PartResult& r, const pipeline::Verificati
 // The drift watch's state of each feature (results::ResultEntry::drift) into the registers.
 void set_drift(plc::PartResult& p, const std::vector<std::pair<std::string, std::string>>& drift);
 
+// What the PLC is shown for a part, kept in its results line ("plc", docs/results.md) so that it
+// can be shown again after a crash took it from the registers: the result (or the fault, non-zero)
+// as a JSON object's text, and back. The sequence and the time are the line's own.
+std::string plc_json(const plc::PartResult& p, std::uint16_t fault);
+struct PlcShown {
+    plc::PartResult result;
+    std::uint16_t fault = 0;
+};
+core::Result<PlcShown> plc_from_json(const std::string& results_line);
+
 // "OK", "NOK", ... as the PLC's overall verdict reads.
 std::string verdict_text(const pipeline::PartResult& r, const pipeline::Verification* check);
 

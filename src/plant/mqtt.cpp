@@ -425,6 +425,8 @@ core::Result<void> Publisher::result(std::string_view json_line) {
     return impl_->spool->append(json_line);
 }
 
+std::optional<std::string> Publisher::last_result() const { return impl_->spool->last_appended(); }
+
 void Publisher::state(std::string json) {
     std::lock_guard lock(impl_->mutex);
     impl_->state = {std::move(json), true};

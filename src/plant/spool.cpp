@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <charconv>
 #include <cstring>
+#include <fstream>
 #include <vector>
 
 #include "log.hpp"
@@ -66,18 +67,20 @@ std::uint64_t read_cursor(const fs::path& file) {
 }
 
 // Written to a temporary file, synced and renamed over the old one: a crash leaves either.
-core::Result<void> write_cursor(const fs::path& dir, std::uint64_t cursor) {
-    const fs::path file = dir / "spool.cursor", tmp = dir / "spool.cursor.tmp";
+core::Result<void> write_small(const fs::path& dir, const char* name, const std::string& text) {
+    const fs::path file = dir / name, tmp = dir / (std::string(name) + ".tmp");
     {
         Fd f(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644));
-        if (f.fd < 0 || !write_all(f.fd, std::to_string(cursor) + "\n") || ::fsync(f.fd) != 0)
-            return core::make_error(tmp.string() +
-                                    ": cannot write the spool's cursor: " + errno_text());
+        if (f.fd < 0 || !write_all(f.fd, text + "\n") || ::fsync(f.fd) != 0)
+            return core::make_error(tmp.string() + ": cannot write: " + errno_text());
     }
     if (::rename(tmp.c_str(), file.c_str()) != 0)
-        return core::make_error(file.string() +
-                                ": cannot replace the spool's cursor: " + errno_text());
+        return core::make_error(file.string() + ": cannot replace: " + errno_text());
     return sync_dir(dir);
+}
+
+core::Result<void> write_cursor(const fs::path& dir, std::uint64_t cursor) {
+    return write_small(dir, "spool.cursor", std::to_string(cursor));
 }
 
 }  // namespace
@@ -247,8 +250,10 @@ core::Result<void> Spool::pop() {
         if (auto ok = write_cursor(s.config.dir, next); !ok) return ok;
         s.cursor = next;
     } else {
-        // All acknowledged: empty the file first, then the cursor. A crash between the two
-        // leaves a cursor past the end, which open() reads as 0 of an empty file: nothing again.
+        // All acknowledged: the last message kept aside, then the file emptied, then the
+        // cursor. A crash between the last two leaves a cursor past the end, which open() reads
+        // as 0 of an empty file: nothing again.
+        if (auto ok = write_small(s.config.dir, "spool.last", *line); !ok) return ok;
         if (::ftruncate(s.fd, 0) != 0)
             return core::make_error(s.file.string() + ": cannot empty the spool: " + errno_text());
         s.size = s.cursor = s.depth = 0;
@@ -259,6 +264,31 @@ core::Result<void> Spool::pop() {
     }
     --s.depth;
     return {};
+}
+
+std::optional<std::string> Spool::last_appended() const {
+    std::lock_guard lock(impl_->mutex);
+    const Impl& s = *impl_;
+    if (s.size > 0) {  // the line that ends at the end of the file: its start, block by block
+        std::uint64_t start = s.size - 1;  // before the last '\n'
+        char buf[4096];
+        while (start > 0) {
+            const std::uint64_t from = start > sizeof buf ? start - sizeof buf : 0;
+            const auto n = static_cast<std::size_t>(start - from);
+            if (::pread(s.fd, buf, n, static_cast<off_t>(from)) != static_cast<ssize_t>(n))
+                return std::nullopt;
+            if (const void* nl = ::memrchr(buf, '\n', n)) {
+                start = from + static_cast<std::uint64_t>(static_cast<const char*>(nl) - buf) + 1;
+                break;
+            }
+            start = from;
+        }
+        return s.line_at(start);
+    }
+    std::ifstream kept(s.config.dir / "spool.last");
+    std::string line;
+    if (kept && std::getline(kept, line) && !line.empty()) return line;
+    return std::nullopt;
 }
 
 SpoolState Spool::state() const {

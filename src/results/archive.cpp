@@ -2,8 +2,11 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
 #include <vector>
 
+#include "hotgauge/core/clock.hpp"
 #include "hotgauge/core/log.hpp"
 #include "hotgauge/io/recording_io.hpp"
 #include "hotgauge/results/results_log.hpp"
@@ -84,14 +87,24 @@ fs::path RawArchive::folder(const std::string& part_id, std::uint64_t sequence,
 core::Result<fs::path> RawArchive::store(const core::Recording& rec, std::uint64_t sequence,
                                          std::int64_t time_ns) {
     const fs::path where = folder(rec.part_id, sequence, time_ns);
-    if (auto ok = io::write_recording(rec, where); !ok) return ok.error();
+    fs::path partial = where;
+    partial += ".partial";
+    std::error_code ec;
+    fs::remove_all(partial, ec);
+    if (auto ok = io::write_recording(rec, partial); !ok) {
+        fs::remove_all(partial, ec);
+        return ok.error();
+    }
+    if (fs::rename(partial, where, ec); ec) {
+        fs::remove_all(partial, ec);
+        return core::make_error(where.string() + ": " + ec.message());
+    }
     // Within the quota again: oldest first, never the one just written.
     std::uint64_t used = used_bytes();
     for (const auto& old : recordings(config_.dir)) {
         if (used <= config_.quota_bytes) break;
         if (old == where) continue;
         const std::uint64_t size = tree_bytes(old);
-        std::error_code ec;
         fs::remove_all(old, ec);
         if (ec) {
             log().error("{}: cannot delete for the archive quota: {}", old.string(), ec.message());
@@ -102,6 +115,41 @@ core::Result<fs::path> RawArchive::store(const core::Recording& rec, std::uint64
         fs::remove(old.parent_path(), ec);  // the day folder, once empty (fails otherwise)
     }
     return where;
+}
+
+std::vector<fs::path> RawArchive::complete(const std::vector<std::string>& lines) {
+    std::vector<fs::path> marked;
+    for (const auto& text : lines) {
+        const auto j = nlohmann::json::parse(text, nullptr, false);
+        if (!j.is_object() || !j.contains("archived_as") || !j["archived_as"].is_string()) continue;
+        const fs::path where = j["archived_as"].get<std::string>();
+        fs::path partial = where;
+        partial += ".partial";
+        std::error_code ec;
+        if (fs::exists(where, ec)) continue;
+        fs::remove_all(partial, ec);
+        fs::create_directories(where, ec);
+        std::ofstream note(where / kNotArchived);
+        note << "The raw recording of part " << j.value("/part/part_id"_json_pointer, std::string())
+             << " (sequence " << j.value("sequence", 0ull) << ", " << j.value("time", std::string())
+             << ") was not archived: hotgauged stopped (a crash, a kill, a power cut) or the disk "
+                "was full after the part's result was committed and before its recording was "
+                "written. Found and noted at the next start, "
+             << core::iso8601_utc(core::realtime_ns())
+             << ". The part's result is in the results files.\n";
+        note.close();
+        if (!note) {
+            log().error("{}: the part's recording is not there, and this could not be said in it",
+                        where.string());
+            continue;
+        }
+        log().warn(
+            "{}: the part's recording was never written (the daemon stopped before); "
+            "{} says so",
+            where.string(), kNotArchived);
+        marked.push_back(where);
+    }
+    return marked;
 }
 
 }  // namespace hotgauge::results

@@ -7,6 +7,8 @@
 #include <nlohmann/json.hpp>
 #include <string_view>
 
+#include "hotgauge/results/archive.hpp"
+
 namespace hotgauge::results {
 namespace {
 
@@ -202,6 +204,12 @@ core::Result<std::filesystem::path> archived_recording(const std::filesystem::pa
         return core::make_error(where + ": " + part + " was archived as " +
                                 archived_as->get<std::string>() +
                                 ", which is gone (deleted to keep the archive's quota?)");
+    if (std::ifstream note(folder / RawArchive::kNotArchived); note) {
+        std::string why;
+        std::getline(note, why);
+        return core::make_error(where + ": " + part + " has no recording in " + folder.string() +
+                                ": " + why);
+    }
     return folder;
 }
 

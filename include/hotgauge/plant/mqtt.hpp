@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -74,6 +75,8 @@ class Publisher {
     // A result's JSON line into the spool (durable when it returns); refused when the spool is
     // full or cannot be written, with the reason.
     core::Result<void> result(std::string_view json_line);
+    // The newest result line ever put in the spool (Spool::last_appended).
+    std::optional<std::string> last_result() const;
     // The latest state and health (JSON objects): sent retained when they change and again
     // after every reconnection; only the newest matters, so they are not spooled.
     void state(std::string json);

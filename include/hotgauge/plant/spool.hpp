@@ -8,6 +8,7 @@
 // On disk, in the spool's folder:
 //   spool.jsonl   the messages, one per line, in the order they were appended
 //   spool.cursor  the byte offset in spool.jsonl up to which messages are acknowledged
+//   spool.last    the last message appended, kept when spool.jsonl is emptied (last_appended())
 // When every message is acknowledged the file is emptied. A last line without its newline (the
 // power went during an append) is cut off at open(), and logged.
 //
@@ -55,6 +56,9 @@ class Spool {
     std::optional<std::string> front() const;
     // The front message was acknowledged: it leaves the spool, durably.
     core::Result<void> pop();
+    // The newest message ever appended (acknowledged or not), for a writer that must know where
+    // to go on after a crash; nullopt for a spool never appended to.
+    std::optional<std::string> last_appended() const;
     SpoolState state() const;
     const std::filesystem::path& dir() const;
 

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "hotgauge/core/recording.hpp"
 #include "hotgauge/core/result.hpp"
@@ -25,14 +26,21 @@ class RawArchive {
 
     // Whether this part's recording is kept: not OK (NOK, not measured), degraded, or the Nth OK.
     bool wants(const pipeline::PartResult& result, std::uint64_t sequence) const;
-    // Writes the recording to DIR/YYYY-MM-DD/<sequence>_<part id>/ (local date of time_ns), then
-    // deletes the oldest recordings until the archive is within its quota (never the new one).
-    // Returns the new recording's folder.
+    // Writes the recording to DIR/YYYY-MM-DD/<sequence>_<part id>.partial/ and renames it to
+    // .../<sequence>_<part id>/ (local date of time_ns) once whole, then deletes the oldest
+    // recordings until the archive is within its quota (never the new one). Returns the new
+    // recording's folder. A failure leaves no folder under the final name.
     core::Result<std::filesystem::path> store(const core::Recording& recording,
                                               std::uint64_t sequence, std::int64_t time_ns);
     // The folder store() writes for this part (so that a results line can name it first).
     std::filesystem::path folder(const std::string& part_id, std::uint64_t sequence,
                                  std::int64_t time_ns) const;
+    // After a crash: every committed results line (JSON text, results::last_result_lines) that
+    // names an archive folder which is not there gets that folder with a file NOT_ARCHIVED.txt
+    // saying why, and a .partial folder left by the crash is deleted. Returns the folders so
+    // marked.
+    std::vector<std::filesystem::path> complete(const std::vector<std::string>& committed_lines);
+    static constexpr const char* kNotArchived = "NOT_ARCHIVED.txt";
     // Bytes the archived recordings take now.
     std::uint64_t used_bytes() const;
     const ArchiveConfig& config() const { return config_; }

@@ -3,7 +3,13 @@
 // highest number given to a part is written to DIR/.sequence, and synced, before the part is
 // measured, so that a number is never used twice: not after a part whose result never reached the
 // files (PLC fault 206, a full disk), nor after a crash during a part. The results files say
-// which numbers were committed; this file says which were used.
+// which numbers were committed; this file says which were used, by which part (the PLC's part id
+// and recipe slot), and whether the daemon stopped cleanly after it: a restart tells from it the
+// part a crash interrupted (docs/results.md "One commit per part").
+//
+// The file: one fixed-width line "<number, 20> <part id, 10> <slot, 5> <R|S>\n", R while the
+// daemon runs, S once it stopped cleanly. (A line of only the number, as before, reads as a clean
+// stop of an unknown part.)
 #include <sys/types.h>
 
 #include <cstdint>
@@ -23,18 +29,27 @@ class SequenceReservation {
     SequenceReservation& operator=(SequenceReservation&&) noexcept;
     ~SequenceReservation();
 
-    std::uint64_t reserved() const { return reserved_; }  // 0: none yet
-    // Records `n` as used (in place, a fixed-width line: no block to allocate on a full disk);
-    // durable when it returns.
-    core::Result<void> reserve(std::uint64_t n);
+    struct Use {
+        std::uint64_t sequence = 0;  // 0: none yet
+        std::uint32_t part_id = 0;   // 0: not known
+        std::uint16_t slot = 0;
+        bool clean_stop = true;  // the daemon stopped cleanly after it
+    };
+    std::uint64_t reserved() const { return last_.sequence; }
+    const Use& last() const { return last_; }
+    // Records `n` as used by part `part_id` (in place, a fixed-width line: no block to allocate
+    // on a full disk); durable when it returns.
+    core::Result<void> reserve(std::uint64_t n, std::uint32_t part_id = 0, std::uint16_t slot = 0);
+    // The daemon stops cleanly: said in the file (durably) for the next start.
+    core::Result<void> stopped();
 
   private:
-    ssize_t put(std::uint64_t n) const;  // n's line in place, synced
-    SequenceReservation(int fd, std::filesystem::path path, std::uint64_t reserved)
-        : fd_(fd), path_(std::move(path)), reserved_(reserved) {}
+    ssize_t put(const Use& use) const;  // the line in place, synced
+    core::Result<void> keep(const Use& use);
+    SequenceReservation(int fd, std::filesystem::path path) : fd_(fd), path_(std::move(path)) {}
     int fd_ = -1;
     std::filesystem::path path_;
-    std::uint64_t reserved_ = 0;
+    Use last_;
 };
 
 }  // namespace hotgauge::results
