@@ -9,8 +9,9 @@ shim (tests/crash_shim.c: a glob on the file's path, the operation, the mode), a
 that the test creates just before the part, so the start's own writes pass. The points:
 
   .sequence write and sync (the number reserved), the day's JSON line write and sync (the
-  commit), the CSV row, the archive's .partial folder, a file in it and its rename, the plant
-  spool's append and sync, and, after the broker's acknowledgement, spool.last and spool.cursor.
+  commit), the CSV row, the archive's .partial folder, a file in it, their sync and the rename,
+  the plant spool's append and sync, and, after the broker's acknowledgement, spool.last and
+  spool.cursor (on the publisher's thread: the part before's, or this one's).
 
 After every restart, before anything else, the files are checked:
   - JSON sequences strictly increasing; the CSV rows the same parts (sequence, part id, verdict);
@@ -21,7 +22,8 @@ After every restart, before anything else, the files are checked:
 Then the PLC triggers the interrupted part again (same part id) unless it saw DONE: a part whose
 result committed gets that result again (same sequence, no new line); one whose result never
 committed is measured under a new number, above every number used before, its line and row
-saying `remeasure_of` the number it lost.
+saying `remeasure_of` the number it lost. Last, a part whose DONE the PLC acknowledged, a kill
+while idle and the same part id triggered again: measured anew (a repeat, not a re-show).
 
     /usr/bin/python3 crash_points_test.py BUILD_DIR SHIM
 """
@@ -54,6 +56,7 @@ POINTS = [
     ("CSV row write", "*/results/[0-9]*.csv", "write", True),
     ("archive folder", "*/archive/*.partial", "mkdir", True),
     ("archive file", "*/archive/*.partial/*", "write", True),
+    ("archive sync", "*/archive/*.partial*", "sync", True),
     ("archive rename", "*/archive/*.partial", "rename", True),
     ("spool write", "*/spool/spool.jsonl", "write", True),
     ("spool sync", "*/spool/spool.jsonl", "sync", True),
@@ -132,11 +135,11 @@ def crash(line, plc, conveyor, point, mode, part_id):
     name, _, _, _ = point
     open(os.path.join(line.workdir, "arm"), "w").close()
     conveyor.load(1)
-    plc.to_idle()
     try:
+        plc.to_idle()
         plc.trigger(part_id)
-    except Exception:  # killed before it answered the trigger (the sequence's points)
-        pass
+    except Exception:  # killed before it answered: the sequence's points, or the publisher's
+        pass  # thread acknowledging the part before's result (spool.last, spool.cursor)
     deadline = time.monotonic() + 60
     state, seq = None, None
     while time.monotonic() < deadline:
@@ -162,6 +165,28 @@ def crash(line, plc, conveyor, point, mode, part_id):
         line.daemon.proc.kill()
         line.daemon.proc.wait(10)
     return state, seq
+
+
+def taken_then_killed(line, plc, conveyor, part_id):
+    """A part measured and its DONE acknowledged, hotgauged killed while idle, restarted: the same
+    part id triggered again (a repeat measurement) is measured anew, not shown the old result."""
+    r = vl.run_part(plc, conveyor, 1, part_id)  # acknowledges DONE
+    assert r["state"] == vl.DONE, r
+    vl.wait_for(lambda: open(os.path.join(line.results_dir, ".sequence")).read().split()[3] == "D",
+                ".sequence marked D once the PLC took the result", 10)
+    line.daemon.proc.kill()
+    line.daemon.proc.wait(10)
+    line.start_daemon()
+    plc2 = vl.Plc(line.plc_port)
+    try:
+        again = vl.run_part(plc2, conveyor, 1, part_id)
+        assert again["state"] == vl.DONE and again["sequence"] == (r["sequence"] + 1) & 0xFFFF, \
+            f"triggered again: seq {again['sequence']}, the first was {r['sequence']}"
+        settled(line, part_id)
+        last = committed(line)[-1]
+        assert json.loads(last).get("remeasure_of") is None, "a repeat is not a re-measurement"
+    finally:
+        plc2.close()
 
 
 def main():
@@ -205,7 +230,9 @@ def main():
                 mine = [p for p in parts if p["part"]["part_id"] == str(part_id)]
                 assert len(mine) <= 1, f"part {part_id} committed twice"
                 if mine:
-                    assert point[3] is not False or mode == "kill" and point[2] == "sync", \
+                    # killed before the JSON line's sync: written, so committed (a kill, not a
+                    # power cut)
+                    assert point[3] is not False or (mode, point[0]) == ("kill", "JSON line sync"), \
                         f"committed although stopped before the commit"
                 elif point[3]:
                     raise AssertionError("stopped after the commit, yet no line")
@@ -234,11 +261,18 @@ def main():
                         f"remeasure_of {new.get('remeasure_of')}, the part lost {lost}"
                     used.add(new["sequence"])
                     print(f"{label}: not committed ("
-                          f"{f'seq {lost} lost' if numbered else 'refused before its number'}"
+                          f"{f'seq {lost} lost' if numbered else 'stopped before it had a number'}"
                           f"), measured again as seq {new['sequence']}", flush=True)
             except (AssertionError, TimeoutError) as e:
                 failures.append(f"{label}: {e}")
                 print(f"{label}: FAILED: {e}", flush=True)
+        if not failures:
+            try:
+                taken_then_killed(line, plc, conveyor, part_id + 1)
+                print("killed while idle after the PLC took a part's result: the same part "
+                      "triggered again is measured anew", flush=True)
+            except (AssertionError, TimeoutError) as e:
+                failures.append(f"killed after the PLC took the result: {e}")
         plc.close()
         conveyor.close()
     finally:

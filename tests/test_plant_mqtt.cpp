@@ -214,7 +214,7 @@ TEST(Spool, TheLastAppendedMessageOutlivesItsAcknowledgement) {
         ASSERT_TRUE(s);
         EXPECT_FALSE(s->last_appended()) << "never appended to";
         const std::string big(10000, 'b');  // longer than one read block
-        for (const std::string m : {std::string("a1"), big}) ASSERT_TRUE(s->append(m).ok());
+        for (const std::string& m : {std::string("a1"), big}) ASSERT_TRUE(s->append(m).ok());
         EXPECT_EQ(s->last_appended(), big);
         ASSERT_TRUE(s->pop().ok());
         EXPECT_EQ(s->last_appended(), big);
@@ -228,6 +228,14 @@ TEST(Spool, TheLastAppendedMessageOutlivesItsAcknowledgement) {
     auto s = open_spool(spool_config(d.path));
     ASSERT_TRUE(s);
     EXPECT_EQ(s->last_appended(), "c3");
+    ASSERT_TRUE(s->start_after("z0").ok());
+    EXPECT_EQ(s->last_appended(), "c3") << "only a spool never appended to takes a start";
+    test::TempDir fresh;
+    auto t = open_spool(spool_config(fresh.path));
+    ASSERT_TRUE(t);
+    ASSERT_TRUE(t->start_after("{\"sequence\":7}").ok());
+    EXPECT_EQ(t->last_appended(), "{\"sequence\":7}");
+    EXPECT_EQ(t->state().depth, 0u) << "nothing to send";
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -318,6 +318,46 @@ TEST(ResultsLog, CsvRowsACrashLeftOutAreWrittenFromTheJsonLinesAtOpen) {
     for (const auto& [file, rows] : whole) EXPECT_EQ(lines(file), rows) << file;
 }
 
+// The first start after an upgrade that changed the CSV header (issue 39 added remeasure_of):
+// the rows already in the day's CSV under the old header are not written again into the new
+// header's file; the one a crash left out is. And more CSV files than the log keeps open (days
+// and recipes) do not stop the start.
+TEST(ResultsLog, RowsUnderAnOlderHeaderAreNotWrittenAgain) {
+    test::TempDir tmp;
+    const auto dir = tmp.path / "results";
+    const auto a = part("A-1", 3, 60.0);
+    std::vector<std::string> rows;
+    {
+        auto log = results::ResultsLog::open({dir, false});
+        ASSERT_TRUE(log.ok());
+        for (std::uint64_t seq = 1; seq <= 12; ++seq) {  // more day files than are kept open
+            const std::int64_t day = static_cast<std::int64_t>(seq) * 86'400'000'000'000;
+            ASSERT_TRUE(log->append({kNoon + day, seq, &a, "v", "h", std::nullopt}).ok());
+        }
+        rows = lines(log->last_csv());
+    }
+    // The last day's CSV as the older version wrote it: no remeasure_of column, part 12 missing.
+    const auto day12 = dir / (results::local_date(kNoon + 12 * 86'400'000'000'000) + ".csv");
+    ASSERT_EQ(rows.size(), 2u);
+    std::string old_header = rows[0];
+    old_header.replace(old_header.find(",remeasure_of"), 13, "");
+    std::ofstream(day12, std::ios::trunc) << old_header << "\n";
+    const auto day11 = dir / (results::local_date(kNoon + 11 * 86'400'000'000'000) + ".csv");
+    std::vector<std::string> old11 = lines(day11);
+    old11[0] = old_header;  // part 11's row under the old header
+    {
+        std::ofstream out(day11, std::ios::trunc);
+        for (const auto& l : old11) out << l << "\n";
+    }
+    auto again = results::ResultsLog::open({dir, false});
+    ASSERT_TRUE(again.ok());
+    EXPECT_EQ(again->completed_at_open(), (std::vector<std::uint64_t>{12}));
+    EXPECT_EQ(lines(day11), old11) << "part 11 is there, under the old header";
+    EXPECT_FALSE(std::filesystem::exists(dir / (day11.stem().string() + ".hub-a.csv")));
+    const auto moved = dir / (day12.stem().string() + ".hub-a.csv");  // the new header's file
+    EXPECT_EQ(lines(moved), rows);
+}
+
 TEST(ResultsLog, TheLastResultLinesSpanDayFilesAndLeaveATornLineOut) {
     test::TempDir tmp;
     std::ofstream(tmp.path / "2026-12-01.jsonl") << "{\"sequence\":1}\n{\"sequence\":2}\n";
@@ -411,7 +451,9 @@ TEST(RawArchive, AFolderACrashNeverWroteIsSaidSoAtTheNextStart) {
     const auto results_dir = tmp.path / "results";
     std::filesystem::create_directories(results_dir);
     std::vector<std::string> committed;
-    for (auto [seq, where] : {std::pair{1, *stored}, std::pair{2, lost}}) {
+    // Part 0's folder was deleted for the quota (older than a folder still there): not marked.
+    const auto deleted = archive->folder("P-0", 0, kNoon);
+    for (auto [seq, where] : {std::pair{0, deleted}, std::pair{1, *stored}, std::pair{2, lost}}) {
         nlohmann::json j{{"sequence", seq},
                          {"time", "2026-11-18T12:00:00.000+00:00"},
                          {"archived_as", where.string()},
@@ -419,16 +461,18 @@ TEST(RawArchive, AFolderACrashNeverWroteIsSaidSoAtTheNextStart) {
         committed.push_back(j.dump());
     }
     committed.push_back(R"({"sequence":3,"archived_as":null})");  // not archived: nothing to do
-    std::ofstream(results_dir / "2026-11-18.jsonl") << committed[0] << "\n"
-                                                    << committed[1] << "\n"
-                                                    << committed[2] << "\n";
+    {
+        std::ofstream out(results_dir / "2026-11-18.jsonl");
+        for (const auto& l : committed) out << l << "\n";
+    }
     EXPECT_EQ(archive->complete(committed), (std::vector<std::filesystem::path>{lost}));
+    EXPECT_FALSE(std::filesystem::exists(deleted));
     EXPECT_FALSE(std::filesystem::exists(lost.string() + ".partial"));
     EXPECT_TRUE(std::filesystem::exists(lost / results::RawArchive::kNotArchived));
     EXPECT_TRUE(io::read_recording(*stored).ok());  // the whole one untouched
     auto back = results::archived_recording(results_dir, 2);
     ASSERT_FALSE(back.ok());
-    EXPECT_NE(back.error().message.find("2026-11-18.jsonl:2: part sequence 2 has no recording"),
+    EXPECT_NE(back.error().message.find("2026-11-18.jsonl:3: part sequence 2 has no recording"),
               std::string::npos)
         << back.error().message;
     EXPECT_NE(back.error().message.find("hotgauged stopped"), std::string::npos);
@@ -467,8 +511,11 @@ TEST(SequenceReservation, KeepsTheHighestNumberUsedAcrossReopeningAndAFullDisk) 
         auto s = results::SequenceReservation::open(tmp.path);
         ASSERT_TRUE(s.ok()) << s.error().message;
         EXPECT_EQ(s->reserved(), 0u);
-        EXPECT_TRUE(s->last().clean_stop);
+        EXPECT_FALSE(s->last().unfinished());
         ASSERT_TRUE(s->reserve(41, 7001, 1).ok());
+        EXPECT_TRUE(s->last().unfinished());
+        ASSERT_TRUE(s->taken().ok());  // the PLC took part 41's result
+        EXPECT_FALSE(s->last().unfinished());
         ASSERT_TRUE(s->reserve(42, 4294967295u, 65535).ok());
     }
     {
@@ -478,14 +525,14 @@ TEST(SequenceReservation, KeepsTheHighestNumberUsedAcrossReopeningAndAFullDisk) 
         EXPECT_EQ(s->reserved(), 42u);
         EXPECT_EQ(s->last().part_id, 4294967295u);
         EXPECT_EQ(s->last().slot, 65535);
-        EXPECT_FALSE(s->last().clean_stop);
+        EXPECT_TRUE(s->last().unfinished());
         ASSERT_TRUE(s->stopped().ok());
     }
     {
         auto s = results::SequenceReservation::open(tmp.path);
         ASSERT_TRUE(s.ok());
         EXPECT_EQ(s->reserved(), 42u);
-        EXPECT_TRUE(s->last().clean_stop) << "stopped cleanly";
+        EXPECT_EQ(s->last().state, 'S') << "stopped cleanly";
         EXPECT_EQ(s->last().part_id, 4294967295u);
         // A full disk (no file may grow past its size): the number is written in place.
         signal(SIGXFSZ, SIG_IGN);
@@ -502,7 +549,7 @@ TEST(SequenceReservation, KeepsTheHighestNumberUsedAcrossReopeningAndAFullDisk) 
     EXPECT_EQ(results::SequenceReservation::open(tmp.path)->reserved(), 18446744073709551615ull);
     std::ofstream(tmp.path / ".sequence") << "                  17\n";  // the first format
     EXPECT_EQ(results::SequenceReservation::open(tmp.path)->last().sequence, 17u);
-    EXPECT_TRUE(results::SequenceReservation::open(tmp.path)->last().clean_stop);
+    EXPECT_EQ(results::SequenceReservation::open(tmp.path)->last().state, 'S');
     std::ofstream(tmp.path / ".sequence") << "17 7001 1 X\n";
     EXPECT_FALSE(results::SequenceReservation::open(tmp.path).ok()) << "no such state";
     std::ofstream(tmp.path / ".sequence") << "forty-two\n";

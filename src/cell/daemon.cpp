@@ -296,7 +296,10 @@ struct Daemon::Impl {
     core::Result<std::uint64_t> take_sequence(std::uint32_t part_id, std::uint16_t slot);
     void refuse(const plc::TriggerRequest& t, const std::string& recipe, const std::string& reason,
                 plc::ErrorCode error);
-    std::optional<Unfinished> unfinished;  // under stats_mutex
+    std::optional<Unfinished> unfinished;         // under stats_mutex
+    std::atomic<std::uint64_t> committed_seq{0};  // the last sequence whose result committed
+    std::uint64_t taken_failed = 0;               // control thread: taken() failed for it
+    void mark_taken(plc::State st);
     void find_unfinished(const fs::path& dir);
     bool show_again(const plc::TriggerRequest& t, const Unfinished& u);
 
@@ -393,6 +396,7 @@ void Daemon::Impl::control_loop() {
         update_health();
         if (in_flight == 0) {
             const auto st = server->state();
+            mark_taken(st);
             set_state(st == plc::State::kFault ? "fault: waiting for the PLC's reset"
                                                : "idle: waiting for a trigger");
         }
@@ -469,10 +473,15 @@ void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
         std::lock_guard lock(stats_mutex);
         before.swap(unfinished);  // only the next trigger can be that part again
     }
-    const bool same_part = before && before->part_id == t.part_id && before->slot == t.recipe_slot;
+    const bool same_part =
+        before && t.part_id != 0 && before->part_id == t.part_id && before->slot == t.recipe_slot;
     if (same_part && !before->committed_line.empty() && show_again(t, *before)) return;
     const auto sequence = take_sequence(t.part_id, t.recipe_slot);
-    if (!sequence)  // a number not kept is not used
+    if (!sequence) {  // a number not kept is not used; the part triggered again is still that one
+        std::lock_guard lock(stats_mutex);
+        if (!unfinished) unfinished = std::move(before);
+    }
+    if (!sequence)
         return refuse(t, r->second.name,
                       "no sequence number can be kept: " + sequence.error().message,
                       plc::ErrorCode::kNotStored);
@@ -513,12 +522,25 @@ void Daemon::Impl::refuse(const plc::TriggerRequest& t, const std::string& recip
     ++stats.failed;
 }
 
+// The PLC took the committed result of the last part numbered (acknowledged DONE, or reset a
+// FAULT or its cycle): its cycle is over, and a restart now has nothing to show again. A part
+// whose result never committed stays in its cycle until measured again.
+void Daemon::Impl::mark_taken(plc::State st) {
+    if (st != plc::State::kIdle || !sequences || !sequences->last().unfinished()) return;
+    const std::uint64_t n = sequences->reserved();
+    if (committed_seq != n || taken_failed == n) return;
+    if (auto ok = sequences->taken(); !ok) {
+        taken_failed = n;  // said once; the next part's number rewrites the line
+        spdlog::warn("{}", ok.error().message);
+    }
+}
+
 // The part the last run had numbered when it died (no clean stop after it), and whether its
 // result committed (it is then the results files' last line).
 void Daemon::Impl::find_unfinished(const fs::path& dir) {
     if (!sequences) return;
     const auto& last = sequences->last();
-    if (last.clean_stop || last.sequence == 0) return;
+    if (!last.unfinished() || last.sequence == 0 || last.part_id == 0) return;  // 0: no id
     Unfinished u{last.sequence, last.part_id, last.slot, {}};
     const auto lines = results::last_result_lines(dir, 1);
     if (!lines.empty()) {
@@ -669,7 +691,13 @@ void Daemon::Impl::shutdown() {
     if (acquisition_thread.joinable()) acquisition_thread.join();
     if (processing_thread.joinable()) processing_thread.join();
     if (accel) accel->stop();
-    if (sequences && in_flight == 0)  // no part left unfinished: the next start need not ask
+    // No part left unfinished (none in its cycle, none waiting to be measured again): the next
+    // start need not ask.
+    const bool pending = [this] {
+        std::lock_guard lock(stats_mutex);
+        return unfinished.has_value();
+    }();
+    if (sequences && in_flight == 0 && !pending)
         if (auto ok = sequences->stopped(); !ok) spdlog::warn("{}", ok.error().message);
     web.reset();    // the page shows the state up to the last part
     plant.reset();  // the broker is told "offline"; what is spooled stays for the next start
@@ -1180,11 +1208,13 @@ void Daemon::Impl::process(Captured c) {
         std::lock_guard lock(stats_mutex);
         store_error = stored ? "" : stored.error().message;
     }
+    if (stored) committed_seq = job.sequence;
     if (!stored) {
         spdlog::error("seq {}: results NOT stored: {}; the result is only in this log: {}",
                       job.sequence, stored.error().message, pipeline::to_json(r));
         std::lock_guard lock(stats_mutex);  // triggered again, it is measured again, said so
-        unfinished = Unfinished{job.sequence, job.trigger.part_id, job.trigger.recipe_slot, {}};
+        if (job.trigger.part_id != 0)
+            unfinished = Unfinished{job.sequence, job.trigger.part_id, job.trigger.recipe_slot, {}};
     }
 
     // Registers last: a result the PLC can acknowledge is already on disk.
@@ -1214,7 +1244,10 @@ void Daemon::Impl::process(Captured c) {
             << " ms, then pipeline " << std::lround(pipeline_ms) << " ms, files "
             << std::lround(store_ms) << " ms)";
     for (const auto& why : r.degraded_reasons) msg << "; degraded: " << why;
-    if (stored) msg << "; " << log->last_csv().string();
+    if (stored && log->csv_error().empty()) msg << "; " << log->last_csv().string();
+    if (stored && !log->csv_error().empty())
+        msg << "; " << log->last_jsonl().string() << " (its CSV row is owed: " << log->csv_error()
+            << ")";
     log_part({job.sequence, r.part_id, r.recipe,
               verdict_field(c.fault != 0 || !stored,
                             to_plc(r, verification ? &*verification : nullptr).overall),
@@ -1254,6 +1287,7 @@ core::Result<std::unique_ptr<Daemon>> Daemon::start(std::shared_ptr<const Setup>
     // Numbering goes on after the highest number used (.sequence) or committed (the files); the
     // PLC's input 5 starts at the last committed one.
     const std::uint64_t committed = results::last_sequence(c.results.dir);
+    impl->committed_seq = committed;
     impl->stats.next_sequence = committed + 1;
     impl->open_sequences(c.results.dir);
     impl->find_unfinished(c.results.dir);

@@ -124,7 +124,7 @@ bool PlantFeed::result(const std::string& jsonl_line, std::uint64_t sequence) {
 
 // After a crash between a part's commit and its spooling: the committed results after the
 // spool's newest, spooled now and in order (docs/plant-data.md "Nothing lost"). A spool never
-// written to starts with the next part.
+// written to starts after the results files' last line (none: with the first part).
 void PlantFeed::catch_up(const std::filesystem::path& results_dir) {
     const auto sequence = [](const std::string& line) -> std::optional<std::uint64_t> {
         const auto j = nlohmann::json::parse(line, nullptr, false);
@@ -133,7 +133,13 @@ void PlantFeed::catch_up(const std::filesystem::path& results_dir) {
         return j["sequence"].get<std::uint64_t>();
     };
     const auto newest = mqtt_->last_result();
-    const auto after = newest ? sequence(*newest) : std::nullopt;
+    if (!newest) {
+        const auto lines = results::last_result_lines(results_dir, 1);
+        if (auto ok = mqtt_->start_after(lines.empty() ? R"({"sequence":0})" : lines.back()); !ok)
+            spdlog::warn("MQTT: {}", ok.error().message);
+        return;
+    }
+    const auto after = sequence(*newest);
     if (!after) return;
     std::vector<std::uint64_t> spooled;
     for (const auto& line :

@@ -427,6 +427,10 @@ core::Result<void> Publisher::result(std::string_view json_line) {
 
 std::optional<std::string> Publisher::last_result() const { return impl_->spool->last_appended(); }
 
+core::Result<void> Publisher::start_after(std::string_view json_line) {
+    return impl_->spool->start_after(json_line);
+}
+
 void Publisher::state(std::string json) {
     std::lock_guard lock(impl_->mutex);
     impl_->state = {std::move(json), true};

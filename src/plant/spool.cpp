@@ -291,6 +291,12 @@ std::optional<std::string> Spool::last_appended() const {
     return std::nullopt;
 }
 
+core::Result<void> Spool::start_after(std::string_view message) {
+    if (last_appended()) return {};
+    std::lock_guard lock(impl_->mutex);
+    return write_small(impl_->config.dir, "spool.last", std::string(message));
+}
+
 SpoolState Spool::state() const {
     std::lock_guard lock(impl_->mutex);
     const Impl& s = *impl_;

@@ -1,7 +1,12 @@
 #include "hotgauge/results/archive.hpp"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <vector>
@@ -54,6 +59,27 @@ std::vector<fs::path> recordings(const fs::path& dir) {
     return out;
 }
 
+// A file or a folder (its entries) to the disk; the error, or "" when synced.
+std::string sync_path(const fs::path& p, bool folder) {
+    const int fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC | (folder ? O_DIRECTORY : 0));
+    const bool ok = fd >= 0 && ::fsync(fd) == 0;
+    const std::string why = ok ? "" : p.string() + ": " + std::strerror(errno);
+    if (fd >= 0) ::close(fd);
+    return why;
+}
+
+// Every file and folder under `dir`, then `dir`, to the disk: a recording renamed to its final
+// name is whole after a power cut too. The first error, or "".
+std::string sync_tree(const fs::path& dir) {
+    std::string why;
+    std::error_code ec;
+    for (auto it = fs::recursive_directory_iterator(dir, ec);
+         !ec && it != fs::recursive_directory_iterator() && why.empty(); it.increment(ec))
+        why = sync_path(it->path(), it->is_directory(ec));
+    if (why.empty() && ec) why = dir.string() + ": " + ec.message();
+    return why.empty() ? sync_path(dir, true) : why;
+}
+
 }  // namespace
 
 core::Result<RawArchive> RawArchive::open(const ArchiveConfig& config) {
@@ -95,10 +121,16 @@ core::Result<fs::path> RawArchive::store(const core::Recording& rec, std::uint64
         fs::remove_all(partial, ec);
         return ok.error();
     }
+    if (const std::string why = sync_tree(partial); !why.empty()) {
+        fs::remove_all(partial, ec);
+        return core::make_error("not stored durably: " + why);
+    }
     if (fs::rename(partial, where, ec); ec) {
         fs::remove_all(partial, ec);
         return core::make_error(where.string() + ": " + ec.message());
     }
+    if (const std::string why = sync_path(where.parent_path(), true); !why.empty())
+        log().warn("{}: the new name may not survive a power cut", why);
     // Within the quota again: oldest first, never the one just written.
     std::uint64_t used = used_bytes();
     for (const auto& old : recordings(config_.dir)) {
@@ -118,15 +150,23 @@ core::Result<fs::path> RawArchive::store(const core::Recording& rec, std::uint64
 }
 
 std::vector<fs::path> RawArchive::complete(const std::vector<std::string>& lines) {
-    std::vector<fs::path> marked;
+    // Only the lines after the newest folder still there: the quota deletes the oldest first, so
+    // a folder missing before it was deleted, not left unwritten.
+    std::vector<nlohmann::json> named;
+    std::error_code ec;
     for (const auto& text : lines) {
-        const auto j = nlohmann::json::parse(text, nullptr, false);
+        auto j = nlohmann::json::parse(text, nullptr, false);
         if (!j.is_object() || !j.contains("archived_as") || !j["archived_as"].is_string()) continue;
+        if (fs::exists(j["archived_as"].get<std::string>(), ec))
+            named.clear();
+        else
+            named.push_back(std::move(j));
+    }
+    std::vector<fs::path> marked;
+    for (const auto& j : named) {
         const fs::path where = j["archived_as"].get<std::string>();
         fs::path partial = where;
         partial += ".partial";
-        std::error_code ec;
-        if (fs::exists(where, ec)) continue;
         fs::remove_all(partial, ec);
         fs::create_directories(where, ec);
         std::ofstream note(where / kNotArchived);

@@ -15,6 +15,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <set>
 #include <string_view>
 #include <vector>
 
@@ -486,17 +487,25 @@ core::Result<void> ResultsLog::append(const ResultEntry& e) {
 namespace {
 
 // The sequence in a CSV file's last row: column 3 of a part's row ("time,time_utc,sequence"),
-// column 2 of a master check's ("time,sequence"); 0 when the file has only its header.
-std::uint64_t last_csv_sequence(int fd, bool check) {
+// column 2 of a master check's ("time,sequence", as its header begins); 0 when the file has only
+// its header. (A last row with a quoted line break in it reads as 0: a part id or reason with a
+// line break is not expected.)
+std::uint64_t last_csv_sequence(const std::filesystem::path& path) {
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return 0;
     struct stat st {};
-    if (::fstat(fd, &st) != 0) return 0;
-    const off_t end = line_end_before(fd, st.st_size);
+    char head[16] = {};
+    const off_t end = ::fstat(fd, &st) == 0 ? line_end_before(fd, st.st_size) : -1;
     const off_t start = end > 0 ? line_end_before(fd, end - 1) : -1;
-    if (start <= 0) return 0;  // the header (or nothing)
-    std::string row(static_cast<std::size_t>(std::min<off_t>(end - 1 - start, 256)), '\0');
-    if (::pread(fd, row.data(), row.size(), start) != static_cast<ssize_t>(row.size())) return 0;
-    std::size_t at = 0;  // past the cells before the sequence (times: no comma, no quote)
-    for (int cells = check ? 1 : 2; cells > 0; --cells) {
+    std::string row(static_cast<std::size_t>(std::clamp<off_t>(end - 1 - start, 0, 256)), '\0');
+    const bool read =
+        start > 0 && ::pread(fd, head, sizeof head - 1, 0) > 0 &&
+        ::pread(fd, row.data(), row.size(), start) == static_cast<ssize_t>(row.size());
+    ::close(fd);
+    if (!read) return 0;  // the header (or nothing)
+    std::size_t at = 0;   // past the cells before the sequence (times: no comma, no quote)
+    for (int cells = std::string_view(head).rfind("time,sequence,", 0) == 0 ? 1 : 2; cells > 0;
+         --cells) {
         const auto comma = row.find(',', at);
         if (comma == std::string::npos) return 0;
         at = comma + 1;
@@ -506,13 +515,28 @@ std::uint64_t last_csv_sequence(int fd, bool check) {
     return n;
 }
 
+// The highest sequence in the CSV files of one day (the day's, its recipes', its checks', those
+// of an earlier header): a part is in the CSV when its sequence is not above it. (Rows are
+// written in sequence order, whichever file they go to.)
+std::uint64_t highest_csv_sequence(const std::filesystem::path& dir, const std::string& date) {
+    std::uint64_t highest = 0;
+    std::error_code ec;
+    for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
+        const std::string name = e.path().filename().string();
+        if (name.rfind(date + ".", 0) == 0 && e.path().extension() == ".csv")
+            highest = std::max(highest, last_csv_sequence(e.path()));
+    }
+    return highest;
+}
+
 }  // namespace
 
 // After a crash between a part's JSON line and its CSV row, or a power cut before the unsynced
-// CSV reached the disk: the rows of the last committed parts that their CSV files lack, written
-// from the JSON lines, in order, then synced.
+// CSV reached the disk: the rows of the last committed parts that the day's CSV files lack,
+// written from the JSON lines, in order, then synced.
 void ResultsLog::complete_csv() {
-    std::map<std::filesystem::path, std::uint64_t> last;  // per CSV file: its last row's sequence
+    std::map<std::string, std::uint64_t> in_csv;  // per local date: the highest sequence there
+    std::set<std::filesystem::path> written;
     for (const auto& line : last_result_lines(config_.dir, kRecoverLines)) {
         std::optional<detail::CsvLine> c;
         try {
@@ -520,27 +544,23 @@ void ResultsLog::complete_csv() {
         } catch (const nlohmann::json::exception&) {
             continue;  // not a result line: read_parts names it
         }
-        if (!owed_.empty()) {  // rows go in order: after one that could not be written, none
+        auto [it, fresh] = in_csv.try_emplace(c->date, 0);
+        if (fresh) it->second = highest_csv_sequence(config_.dir, c->date);
+        if (c->sequence <= it->second) continue;
+        core::Result<void> ok;  // rows go in order: after one not written, the rest are owed
+        if (owed_.empty()) ok = write_csv(*c);
+        if (!ok || !owed_.empty()) {
+            if (!ok) csv_error_ = ok.error().message;
             owed_.push_back(line);
             continue;
         }
-        auto csv = csv_file(*c);
-        core::Result<void> ok = csv ? core::Result<void>() : core::Result<void>(csv.error());
-        if (csv) {
-            auto [it, fresh] = last.try_emplace(*csv, 0);
-            if (fresh) it->second = last_csv_sequence(files_.at(*csv).fd, c->master.has_value());
-            if (c->sequence <= it->second) continue;
-            if (ok = write_csv(*c); ok) {
-                it->second = c->sequence;
-                completed_.push_back(c->sequence);
-                continue;
-            }
-        }
-        csv_error_ = ok.error().message;
-        owed_.push_back(line);
+        it->second = c->sequence;
+        completed_.push_back(c->sequence);
+        written.insert(last_csv_);
     }
-    for (const auto& [path, n] : last)
-        if (config_.sync) ::fdatasync(files_.at(path).fd);
+    for (const auto& path : written)  // the files stay open unless more than 8 were touched
+        if (auto f = files_.find(path); config_.sync && f != files_.end())
+            ::fdatasync(f->second.fd);
     if (!completed_.empty())
         log().warn(
             "{}: wrote the CSV rows of sequences {}..{} ({} parts) from their JSON lines: "
@@ -556,7 +576,11 @@ std::vector<std::string> last_result_lines(const std::filesystem::path& dir, std
     for (const auto& e : std::filesystem::directory_iterator(dir, ec))
         if (e.path().extension() == ".jsonl") days.push_back(e.path());
     std::sort(days.begin(), days.end());
-    std::vector<std::string> out;     // newest first while reading
+    std::vector<std::string> out;  // newest first while reading
+    const auto finish = [](std::vector<std::string>& lines) {
+        std::reverse(lines.begin(), lines.end());
+        return std::move(lines);
+    };
     constexpr off_t kTail = 8 << 20;  // a line is 10–30 kB
     for (auto day = days.rbegin(); day != days.rend() && out.size() < max; ++day) {
         const int fd = ::open(day->c_str(), O_RDONLY | O_CLOEXEC);
@@ -572,15 +596,14 @@ std::vector<std::string> last_result_lines(const std::filesystem::path& dir, std
         std::size_t stop = tail.size() - 1;  // the '\n' ending the last whole line
         while (out.size() < max) {
             const std::size_t nl = stop == 0 ? std::string::npos : tail.rfind('\n', stop - 1);
-            if (nl == std::string::npos && from > 0) break;  // a line cut by the tail's start
+            if (nl == std::string::npos && from > 0) return finish(out);  // no hole: stop
             const std::size_t begin = nl == std::string::npos ? 0 : nl + 1;
             if (stop > begin) out.push_back(tail.substr(begin, stop - begin));
             if (nl == std::string::npos) break;
             stop = nl;
         }
     }
-    std::reverse(out.begin(), out.end());
-    return out;
+    return finish(out);
 }
 
 }  // namespace hotgauge::results

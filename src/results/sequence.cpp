@@ -10,11 +10,13 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <string_view>
 
 namespace hotgauge::results {
 namespace {
 
 constexpr std::size_t kLine = 40;  // "%20llu %10u %5u %c\n"
+constexpr std::string_view kStates = "RDS";
 
 // The line as written, or the old one (a number alone).
 std::optional<SequenceReservation::Use> parse(const std::string& text) {
@@ -24,14 +26,15 @@ std::optional<SequenceReservation::Use> parse(const std::string& text) {
     if (!(in >> use.sequence)) return std::nullopt;
     if (!(in >> part)) return in.eof() ? std::optional(use) : std::nullopt;
     unsigned long long p = 0, s = 0;
-    if (!(in >> slot >> state) || (in >> extra) || (state != "R" && state != "S") ||
+    if (!(in >> slot >> state) || (in >> extra) || state.size() != 1 ||
+        kStates.find(state[0]) == std::string_view::npos ||
         std::from_chars(part.data(), part.data() + part.size(), p).ec != std::errc() ||
         std::from_chars(slot.data(), slot.data() + slot.size(), s).ec != std::errc() ||
         p > UINT32_MAX || s > UINT16_MAX)
         return std::nullopt;
     use.part_id = static_cast<std::uint32_t>(p);
     use.slot = static_cast<std::uint16_t>(s);
-    use.clean_stop = state == "S";
+    use.state = state[0];
     return use;
 }
 
@@ -97,7 +100,7 @@ ssize_t SequenceReservation::put(const Use& use) const {
     char line[kLine + 1];
     std::snprintf(line, sizeof line, "%20llu %10u %5u %c\n",
                   static_cast<unsigned long long>(use.sequence), use.part_id,
-                  static_cast<unsigned>(use.slot), use.clean_stop ? 'S' : 'R');
+                  static_cast<unsigned>(use.slot), use.state);
     const ssize_t written = ::pwrite(fd_, line, kLine, 0);
     return written < 0 || ::fdatasync(fd_) != 0 ? -1 : written;
 }
@@ -117,12 +120,18 @@ core::Result<void> SequenceReservation::keep(const Use& use) {
 
 core::Result<void> SequenceReservation::reserve(std::uint64_t n, std::uint32_t part_id,
                                                 std::uint16_t slot) {
-    return keep({n, part_id, slot, false});
+    return keep({n, part_id, slot, 'R'});
+}
+
+core::Result<void> SequenceReservation::taken() {
+    Use use = last_;
+    use.state = 'D';
+    return keep(use);
 }
 
 core::Result<void> SequenceReservation::stopped() {
     Use use = last_;
-    use.clean_stop = true;
+    use.state = 'S';
     return keep(use);
 }
 

@@ -77,6 +77,7 @@ class Publisher {
     core::Result<void> result(std::string_view json_line);
     // The newest result line ever put in the spool (Spool::last_appended).
     std::optional<std::string> last_result() const;
+    core::Result<void> start_after(std::string_view json_line);  // Spool::start_after
     // The latest state and health (JSON objects): sent retained when they change and again
     // after every reconnection; only the newest matters, so they are not spooled.
     void state(std::string json);

@@ -59,6 +59,9 @@ class Spool {
     // The newest message ever appended (acknowledged or not), for a writer that must know where
     // to go on after a crash; nullopt for a spool never appended to.
     std::optional<std::string> last_appended() const;
+    // For a spool never appended to: `message` is taken as its newest (kept in spool.last), so
+    // that a writer starting to use it knows after a crash where it began.
+    core::Result<void> start_after(std::string_view message);
     SpoolState state() const;
     const std::filesystem::path& dir() const;
 

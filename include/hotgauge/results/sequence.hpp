@@ -4,12 +4,12 @@
 // measured, so that a number is never used twice: not after a part whose result never reached the
 // files (PLC fault 206, a full disk), nor after a crash during a part. The results files say
 // which numbers were committed; this file says which were used, by which part (the PLC's part id
-// and recipe slot), and whether the daemon stopped cleanly after it: a restart tells from it the
-// part a crash interrupted (docs/results.md "One commit per part").
+// and recipe slot), and whether that part's cycle ended: a restart tells from it the part a crash
+// interrupted (docs/results.md "One commit per part").
 //
-// The file: one fixed-width line "<number, 20> <part id, 10> <slot, 5> <R|S>\n", R while the
-// daemon runs, S once it stopped cleanly. (A line of only the number, as before, reads as a clean
-// stop of an unknown part.)
+// The file: one fixed-width line "<number, 20> <part id, 10> <slot, 5> <R|D|S>\n": R from the
+// number's use until the PLC took the part's result, D once it did, S once the daemon stopped
+// cleanly. (A line of only the number, as before, reads as S.)
 #include <sys/types.h>
 
 #include <cstdint>
@@ -33,13 +33,16 @@ class SequenceReservation {
         std::uint64_t sequence = 0;  // 0: none yet
         std::uint32_t part_id = 0;   // 0: not known
         std::uint16_t slot = 0;
-        bool clean_stop = true;  // the daemon stopped cleanly after it
+        char state = 'S';  // R: in its cycle; D: the PLC took its result; S: stopped cleanly
+        bool unfinished() const { return state == 'R'; }
     };
     std::uint64_t reserved() const { return last_.sequence; }
     const Use& last() const { return last_; }
     // Records `n` as used by part `part_id` (in place, a fixed-width line: no block to allocate
     // on a full disk); durable when it returns.
     core::Result<void> reserve(std::uint64_t n, std::uint32_t part_id = 0, std::uint16_t slot = 0);
+    // The PLC took the last part's result (or reset its cycle): its cycle is over.
+    core::Result<void> taken();
     // The daemon stops cleanly: said in the file (durably) for the next start.
     core::Result<void> stopped();
 
