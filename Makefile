@@ -109,12 +109,13 @@ demo: build
 # a seeded schedule (accelerometer loss and outage, camera packet loss and restarts, PLC
 # disconnects, a full results disk, SIGHUP with a bad and a good config, kill -9 of hotgauged
 # with a supervisor that restarts it like systemd), then the report: parts in, results out, lost,
-# duplicated, false NOK, faults by code, RSS over time, cycle time. About 11 s a part; a line
-# uses a third of a core, so SOAK_LINES independent lines share the parts out (seeds SOAK_SEED,
-# SOAK_SEED+1, ...; one folder each under SOAK_OUT): 1000 parts on three lines take about 70 min.
-SOAK_PARTS ?= 1000
+# duplicated, reused sequence numbers, false NOK, faults by code, RSS over time, cycle time.
+# About 11.5 s a part; a line uses a third of a core, so SOAK_LINES independent lines share the
+# parts out (seeds SOAK_SEED, SOAK_SEED+1, ...; one folder each under SOAK_OUT): 2000 parts on
+# five lines take about 80 min (docs/operations.md "The fault soak").
+SOAK_PARTS ?= 2000
 SOAK_SEED ?= 1
-SOAK_LINES ?= 3
+SOAK_LINES ?= 5
 SOAK_OUT ?= out/soak
 soak: build
 	/usr/bin/python3 tests/plant_data_test.py $(BUILD) --outage-parts 30

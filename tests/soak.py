@@ -36,6 +36,8 @@ OUT/report.json (OUT/parts.jsonl, OUT/rss.csv beside it):
   - lost: none (every DONE and FAULT has its row, 206 excepted, which has none; every trigger
     ends in DONE or FAULT unless an injected kill took it);
   - duplicated: no sequence, part id or PLC input-5 value twice; JSON lines and CSV rows pair up;
+  - reused: no sequence number given to two parts (the daemon logs' "part ID seq N" lines, FAULT
+    206 parts included);
   - every DONE matches its row (part id, verdict, feature values to 1 µm, input 5 = the low 16
     bits of its sequence); after a restart, input 5 reads the files' last sequence;
   - false NOK: none (no NOK feature whose true value is within its tolerance), and no trusted
@@ -555,6 +557,22 @@ def check_accounting(records, lines, rows, ck):
             "sequence_first_last": [min(seqs), max(seqs)] if seqs else None}
 
 
+def check_reuse(workdir, ck):
+    """No sequence number given to two parts: every number a daemon gave (its log's "part ID seq N
+    recipe" lines, results stored or not: FAULT 206 too) names one part id. Returns the count of
+    numbers given, the reused ones."""
+    given = collections.defaultdict(set)
+    for name in sorted(os.listdir(workdir)):
+        if re.fullmatch(r"hotgauged\.\d+\.log", name):
+            with open(os.path.join(workdir, name), errors="replace") as f:
+                for m in re.finditer(r"part (\S+) seq (\d+) recipe", f.read()):
+                    given[int(m.group(2))].add(m.group(1))
+    reused = sorted(s for s, ids in given.items() if len(ids) > 1)
+    for s in reused:
+        ck.fail("reused", f"sequence {s} given to parts {sorted(given[s])}")
+    return {"sequences_given": len(given), "reused": len(reused)}
+
+
 def check_attempt_row(rec, a, js, ck):
     """One trigger against the rows with its part id; False when it counts as lost."""
     where = f"part {rec['part']} attempt {a['attempt']} (id {a['part_id']}, {a['state']})"
@@ -874,6 +892,7 @@ def evaluate(a, line, sup, relay, records):
     lines, rows = read_jsonl(line.results_dir), read_csv_rows(line.results_dir)
     ck = Checks()
     fig = check_accounting(records, lines, rows, ck)
+    fig.update(check_reuse(line.workdir, ck))
     fig.update(check_values(records, a.max_error_mm, ck))
     fig["by_fault"] = check_faults(records, lines, ck)
     fig["environment"] = [{"part": r["part"], "events": r["environment"]} for r in records

@@ -478,6 +478,17 @@ TEST(RawArchive, AFolderACrashNeverWroteIsSaidSoAtTheNextStart) {
     EXPECT_NE(back.error().message.find("hotgauged stopped"), std::string::npos);
     EXPECT_TRUE(results::archived_recording(results_dir, 1).ok());
     EXPECT_TRUE(archive->complete(committed).empty()) << "said once";
+    // A store() that failed while the daemon runs says why at once.
+    const auto failed = archive->folder("P-4", 4, kNoon);
+    const nlohmann::json line4{{"sequence", 4}, {"archived_as", failed.string()}};
+    EXPECT_EQ(archive->complete({line4.dump()}, "writing it failed: No space left on device"),
+              (std::vector<std::filesystem::path>{failed}));
+    std::ifstream note(failed / results::RawArchive::kNotArchived);
+    std::string text;
+    std::getline(note, text);
+    EXPECT_NE(text.find("was not archived: writing it failed: No space left on device"),
+              std::string::npos)
+        << text;
 }
 
 TEST(ResultsLog, TheLastSequenceComesFromTheNewestDaysLastWholeLine) {

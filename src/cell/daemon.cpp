@@ -1222,9 +1222,11 @@ void Daemon::Impl::process(Captured c) {
     const std::string outcome = publish(c, entry, stored, shown, problem);
     const std::int64_t published = core::realtime_ns();
     if (archiving && stored) {  // the archive follows from the commit
-        if (auto where = archive->store(c.rec, job.sequence, t_result); !where)
+        if (auto where = archive->store(c.rec, job.sequence, t_result); !where) {
             spdlog::error("seq {}: raw archive: {} (the results line names {})", job.sequence,
                           where.error().message, *entry.archived_as);
+            archive->complete({log->last_line()}, "writing it failed: " + where.error().message);
+        }
     }
     {
         std::lock_guard lock(stats_mutex);

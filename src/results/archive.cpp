@@ -149,7 +149,8 @@ core::Result<fs::path> RawArchive::store(const core::Recording& rec, std::uint64
     return where;
 }
 
-std::vector<fs::path> RawArchive::complete(const std::vector<std::string>& lines) {
+std::vector<fs::path> RawArchive::complete(const std::vector<std::string>& lines,
+                                           const std::string& why) {
     // Only the lines after the newest folder still there: the quota deletes the oldest first, so
     // a folder missing before it was deleted, not left unwritten.
     std::vector<nlohmann::json> named;
@@ -172,21 +173,17 @@ std::vector<fs::path> RawArchive::complete(const std::vector<std::string>& lines
         std::ofstream note(where / kNotArchived);
         note << "The raw recording of part " << j.value("/part/part_id"_json_pointer, std::string())
              << " (sequence " << j.value("sequence", 0ull) << ", " << j.value("time", std::string())
-             << ") was not archived: hotgauged stopped (a crash, a kill, a power cut) or the disk "
-                "was full after the part's result was committed and before its recording was "
-                "written. Found and noted at the next start, "
+             << ") was not archived: " << why << " (noted "
              << core::iso8601_utc(core::realtime_ns())
-             << ". The part's result is in the results files.\n";
+             << "). The part's result is in the results files.\n";
         note.close();
         if (!note) {
             log().error("{}: the part's recording is not there, and this could not be said in it",
                         where.string());
             continue;
         }
-        log().warn(
-            "{}: the part's recording was never written (the daemon stopped before); "
-            "{} says so",
-            where.string(), kNotArchived);
+        log().warn("{}: the part's recording is not there ({}); {} says so", where.string(), why,
+                   kNotArchived);
         marked.push_back(where);
     }
     return marked;

@@ -35,11 +35,15 @@ class RawArchive {
     // The folder store() writes for this part (so that a results line can name it first).
     std::filesystem::path folder(const std::string& part_id, std::uint64_t sequence,
                                  std::int64_t time_ns) const;
-    // After a crash: every committed results line (JSON text, results::last_result_lines) that
-    // names an archive folder which is not there gets that folder with a file NOT_ARCHIVED.txt
-    // saying why, and a .partial folder left by the crash is deleted. Returns the folders so
-    // marked.
-    std::vector<std::filesystem::path> complete(const std::vector<std::string>& committed_lines);
+    // After a crash (or a store() that failed): every committed results line (JSON text,
+    // results::last_result_lines) that names an archive folder which is not there, newer than
+    // every folder that is, gets that folder with a file NOT_ARCHIVED.txt saying `why`, and a
+    // .partial folder left behind is deleted. Returns the folders so marked.
+    std::vector<std::filesystem::path> complete(const std::vector<std::string>& committed_lines,
+                                                const std::string& why = kStoppedBeforeWritten);
+    static constexpr const char* kStoppedBeforeWritten =
+        "hotgauged stopped (a crash, a kill, a power cut) after the part's result was committed "
+        "and before its recording was written; found at the next start";
     static constexpr const char* kNotArchived = "NOT_ARCHIVED.txt";
     // Bytes the archived recordings take now.
     std::uint64_t used_bytes() const;
