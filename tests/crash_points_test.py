@@ -37,6 +37,8 @@ import sys
 import tempfile
 import time
 
+import yaml
+
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import virtual_line as vl  # noqa: E402
 import plant_data_test as pdt  # noqa: E402
@@ -200,8 +202,17 @@ def main():
     line.start_pty()
     line.start_cell()
     line.write_config()
-    with open(line.config_path) as f:  # one face a part: the points, not the measurement
-        text = f.read().replace("faces: [top, bottom, side1, side2]", "faces: [top]")
+    # One face a part (the points, not the measurement): the recipe's features on the top face
+    # alone, as the daemon refuses a feature on a face it does not scan.
+    with open(os.path.join(vl.REPO, "config/parts/hub-a.yaml")) as f:
+        recipe = yaml.safe_load(f)
+    recipe["features"] = [x for x in recipe["features"] if x["faces"] == ["top"]]
+    top_recipe = os.path.join(workdir, "hub-a-top.yaml")
+    with open(top_recipe, "w") as f:
+        yaml.safe_dump(recipe, f, sort_keys=False)
+    with open(line.config_path) as f:
+        text = f.read().replace("faces: [top, bottom, side1, side2]", "faces: [top]").replace(
+            os.path.join(vl.REPO, "config/parts/hub-a.yaml"), top_recipe)
     with open(line.config_path, "w") as f:
         f.write(text)
     failures, used, part_id = [], set(), 7000

@@ -5,7 +5,8 @@ One daemon lives through, in turn:
   1. a good part;
   2. the PLC dropping its connection mid-handshake (BUSY): the result waits for it, valid;
   3. the accelerometer stream stopped: the part is measured and flagged degraded;
-  4. a broken config sent with SIGHUP: rejected, the old one kept, the next part measured;
+  4. a recipe with a slot past the register map's 16, then a broken config, sent with SIGHUP:
+     each rejected naming the feature or the line, the old one kept, the next part measured;
   5. the results directory full (RLIMIT_FSIZE on the daemon): PLC fault 206, nothing half written;
   6. the camera (the whole virtual cell) killed mid-part: PLC fault 203; after it is back, the
      next part is measured;
@@ -198,6 +199,21 @@ def main():
         files_intact()
 
         step("4. a broken config with SIGHUP")
+        # First a recipe the cell cannot run (issue 40): a slot past the register map's 16. The
+        # reload is refused naming the feature, and the part after is measured with the old one.
+        with open(os.path.join(vl.REPO, "config/parts/hub-a.yaml")) as f:
+            slot17 = f.read().replace("slot: 14", "slot: 17", 1)
+        bad_recipe = os.path.join(line.workdir, "hub-a-slot17.yaml")
+        with open(bad_recipe, "w") as f:
+            f.write(slot17)
+        with open(line.config_path, "w") as f:
+            f.write(good_config.replace(os.path.join(vl.REPO, "config/parts/hub-a.yaml"),
+                                        bad_recipe))
+        line.daemon.proc.send_signal(signal.SIGHUP)
+        line.daemon.wait_line(r"reload REJECTED.*feature 'Die shift': slot 17 is outside 1\.\.16",
+                              10)
+        alive(line)
+        expect_ok(part())  # 14 features: the old recipe's
         with open(line.config_path, "w") as f:
             f.write(good_config.replace("camera:", "camera: [unclosed\n  id:", 1))
         line.daemon.proc.send_signal(signal.SIGHUP)

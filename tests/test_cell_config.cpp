@@ -351,6 +351,58 @@ TEST(ReasonBits, FromWhatTheMeasurementRecorded) {
     EXPECT_EQ(cell::feature_reasons(f, &check) & plc::reason::kMasterCheckFailed, 0);
 }
 
+// The register map holds 16 feature blocks: a 17th feature, or a slot past 16, is refused naming
+// the feature (the daemon's load_setup and `hotgauge plc map --recipe`).
+TEST(RecipeForTheCell, SlotsWithinTheRegisterMapAndFacesTheCellScans) {
+    core::Recipe r;
+    r.name = "hub-x";
+    for (int i = 1; i <= 16; ++i) {
+        core::FeatureSpec f;
+        f.name = "F" + std::to_string(i);
+        f.slot = i;
+        f.faces = {"top"};
+        r.features.push_back(f);
+    }
+    const std::vector<std::string> top{"top"}, side{"side1"};
+    EXPECT_TRUE(cell::check_recipe_for_cell(r, "r.yaml", &top).ok());
+    EXPECT_TRUE(cell::check_recipe_for_cell(r, "r.yaml", nullptr).ok());
+    auto unscanned = cell::check_recipe_for_cell(r, "r.yaml", &side);
+    ASSERT_FALSE(unscanned.ok());
+    EXPECT_NE(unscanned.error().message.find("r.yaml: recipe hub-x: feature 'F1' (slot 1) needs "
+                                             "face 'top'"),
+              std::string::npos)
+        << unscanned.error().message;
+    auto more = r;
+    more.features.push_back(r.features[0]);
+    more.features.back().name = "F17";
+    more.features.back().slot = 17;
+    auto seventeen = cell::check_recipe_for_cell(more, "r.yaml", &top);
+    ASSERT_FALSE(seventeen.ok());
+    EXPECT_NE(seventeen.error().message.find("17 features; the PLC's register map holds 16"),
+              std::string::npos)
+        << seventeen.error().message;
+    auto high = r;
+    high.features[15].slot = 40;
+    EXPECT_NE(cell::check_recipe_for_cell(high, "r.yaml", &top)
+                  .error()
+                  .message.find("feature 'F16': slot 40 is outside 1..16"),
+              std::string::npos);
+    auto twice = r;
+    twice.features[15].slot = 3;
+    EXPECT_NE(cell::check_recipe_for_cell(twice, "r.yaml", nullptr)
+                  .error()
+                  .message.find("features 'F3' and 'F16' are both on slot 3"),
+              std::string::npos);
+    // A forging's diameter needs only its first face: the others give its wall, for the draft.
+    auto forged = r;
+    forged.forging.emplace();
+    forged.features[0].faces = {"top", "side1"};
+    EXPECT_TRUE(cell::check_recipe_for_cell(forged, "r.yaml", &top).ok());
+    forged.features[1].faces = {"top", "side1"};
+    forged.features[1].kind = core::FeatureKind::kHeight;
+    EXPECT_FALSE(cell::check_recipe_for_cell(forged, "r.yaml", &top).ok()) << "a height needs all";
+}
+
 // What the PLC was shown, kept in the results line, reads back the same (a part triggered again
 // after a crash is shown it again: docs/results.md "One commit per part").
 TEST(ShownToThePlc, KeptInTheResultsLineReadsBackTheSame) {

@@ -245,6 +245,48 @@ TEST(Daemon, ASetupWithAMissingRecipeIsAnErrorNamingIt) {
         << setup.error().message;
 }
 
+// A recipe the cell cannot run is refused when the setup loads (--check-config, start and
+// reload), naming the feature (issue 40): one on a face the cell does not scan, a slot above the
+// register map's 16, 17 features, two features on one slot (the recipe reader's own check).
+TEST(Daemon, ARecipeTheCellCannotRunIsRefusedNamingTheFeature) {
+    test::TempDir dir;
+    const auto config = dir.path / "hotgauged.yaml";
+    const std::string src = HOTGAUGE_SOURCE_DIR;
+    std::ifstream in(src + "/config/parts/hub-a.yaml");
+    const std::string hub_a{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+    const auto refused = [&](const std::string& recipe, const std::string& faces) {
+        write(dir.path / "part.yaml", recipe);
+        std::string text = config_text(dir.path / "results");
+        text.replace(text.find(src + "/config/parts/hub-a.yaml"),
+                     (src + "/config/parts/hub-a.yaml").size(), (dir.path / "part.yaml").string());
+        text.replace(text.find("faces: [top, bottom, side1, side2]"), 34, faces);
+        write(config, text);
+        auto setup = cell::load_setup(config);
+        return setup ? std::string("loaded") : setup.error().message;
+    };
+    EXPECT_EQ(refused(hub_a, "faces: [top, bottom, side1, side2]"), "loaded");
+    const std::string all = "faces: [top, bottom, side1, side2]";
+    // Diameter 1 is measured on the bottom face and the sides.
+    const auto no_bottom = refused(hub_a, "faces: [top, side1, side2]");
+    EXPECT_NE(no_bottom.find("feature 'Diameter 1' (slot 1) needs face 'bottom', which the cell "
+                             "does not scan"),
+              std::string::npos)
+        << no_bottom;
+    std::string slot17 = hub_a;
+    slot17.replace(slot17.find("slot: 14"), 8, "slot: 17");
+    const auto high = refused(slot17, all);
+    EXPECT_NE(high.find("feature 'Die shift': slot 17 is outside 1..16; the PLC's register map "
+                        "holds 16 feature blocks"),
+              std::string::npos)
+        << high;
+    std::string twice = hub_a;
+    twice.replace(twice.find("slot: 14"), 8, "slot: 13");
+    const auto same = refused(twice, all);
+    EXPECT_NE(same.find("feature 'Die shift' on slot 13, which is feature 'Height 4 side2''s"),
+              std::string::npos)
+        << same;
+}
+
 // The part's model (pipeline::part_model, the tool's and the daemon's one way): a saved model of
 // another part is refused at start naming the file and both parts; the recipe's own loads, and
 // is the model the recipe builds.

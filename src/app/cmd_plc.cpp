@@ -300,6 +300,11 @@ int print_recipe_map(const std::string& file) {
         spdlog::error("{}", recipe.error().message);
         return 1;
     }
+    // What the daemon refuses at load (the faces it scans are in its config: --check-config).
+    if (auto ok = cell::check_recipe_for_cell(*recipe, file, nullptr); !ok) {
+        spdlog::error("{}", ok.error().message);
+        return 1;
+    }
     std::printf("Recipe %s (%s): revision %u (input 118 of its results)\n\n", recipe->name.c_str(),
                 file.c_str(), static_cast<unsigned>(cell::recipe_revision(file)));
     std::printf(

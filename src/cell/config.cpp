@@ -1,5 +1,6 @@
 #include "hotgauge/cell/config.hpp"
 
+#include <algorithm>
 #include <fstream>
 #include <iterator>
 #include <set>
@@ -9,6 +10,7 @@
 #include "hotgauge/cell/plc_sections.hpp"
 #include "hotgauge/io/checksum.hpp"
 #include "hotgauge/io/yaml_reader.hpp"
+#include "hotgauge/plc/register_map.hpp"
 
 namespace hotgauge::cell {
 namespace {
@@ -28,6 +30,37 @@ std::string file_hash(const fs::path& file) {
 }
 
 }  // namespace
+
+core::Result<void> check_recipe_for_cell(const core::Recipe& recipe, const fs::path& file,
+                                         const std::vector<std::string>* faces) {
+    const std::string where = file.string() + ": recipe " + recipe.name + ": ";
+    const std::string map = "the PLC's register map holds " + std::to_string(plc::kMaxFeatures) +
+                            " feature blocks (docs/plc-modbus.md)";
+    if (recipe.features.size() > static_cast<std::size_t>(plc::kMaxFeatures))
+        return core::make_error(where + std::to_string(recipe.features.size()) + " features; " +
+                                map);
+    std::map<int, std::string> slots;
+    for (const auto& f : recipe.features) {
+        if (f.slot < 1 || f.slot > plc::kMaxFeatures)
+            return core::make_error(where + "feature '" + f.name + "': slot " +
+                                    std::to_string(f.slot) + " is outside 1.." +
+                                    std::to_string(plc::kMaxFeatures) + "; " + map);
+        if (auto [it, fresh] = slots.emplace(f.slot, f.name); !fresh)
+            return core::make_error(where + "features '" + it->second + "' and '" + f.name +
+                                    "' are both on slot " + std::to_string(f.slot));
+        if (!faces) continue;
+        // The faces without which it is never measured (measure::measure_one).
+        const bool forged_diameter = recipe.forging && f.kind == core::FeatureKind::kDiameter;
+        for (std::size_t i = 0;
+             i < (forged_diameter ? std::min<std::size_t>(1, f.faces.size()) : f.faces.size()); ++i)
+            if (std::find(faces->begin(), faces->end(), f.faces[i]) == faces->end())
+                return core::make_error(where + "feature '" + f.name + "' (slot " +
+                                        std::to_string(f.slot) + ") needs face '" + f.faces[i] +
+                                        "', which the cell does not scan (faces: in the daemon's "
+                                        "config): every part would read it NOT_MEASURED");
+    }
+    return {};
+}
 
 std::uint16_t recipe_revision(const fs::path& recipe_file) {
     std::ifstream in(recipe_file, std::ios::binary);

@@ -116,6 +116,9 @@ core::Result<std::shared_ptr<const Setup>> load_setup(const fs::path& config_fil
     for (const auto& [slot, path] : s->config.recipes) {
         auto recipe = io::read_recipe(path);
         if (!recipe) return recipe.error();
+        if (auto ok = check_recipe_for_cell(*recipe, path, &s->config.faces); !ok)
+            return core::make_error("recipe slot " + std::to_string(slot) + ": " +
+                                    ok.error().message);
         const auto file = s->config.models.find(slot);
         auto model = pipeline::part_model(
             *recipe, {.model_file = file == s->config.models.end() ? fs::path() : file->second});

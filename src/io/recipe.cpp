@@ -242,14 +242,16 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
         const YAML::Node fl = y.require(root, "recipe", "features");
         if (!fl.IsSequence()) y.fail(fl, "features: expected a list");
         std::set<std::string> names;
-        std::set<int> slots;
+        std::map<int, std::string> slots;  // slot: the feature on it
         for (std::size_t i = 0; i < fl.size(); ++i) {
             const std::string w = "features[" + std::to_string(i) + "]";
             FeatureSpec f = read_feature(y, fl[i], w, r);
             if (!names.insert(f.name).second)
                 y.fail(fl[i], w + ".name: duplicate feature name '" + f.name + "'");
-            if (!slots.insert(f.slot).second)
-                y.fail(fl[i]["slot"], w + ".slot: slot " + std::to_string(f.slot) + " used twice");
+            if (auto [it, fresh] = slots.emplace(f.slot, f.name); !fresh)
+                y.fail(fl[i]["slot"], w + ".slot: feature '" + f.name + "' on slot " +
+                                          std::to_string(f.slot) + ", which is feature '" +
+                                          it->second + "''s already");
             r.features.push_back(std::move(f));
         }
         return r;

@@ -16,6 +16,7 @@
 #include "hotgauge/acquire/session.hpp"
 #include "hotgauge/cell/quality_feed.hpp"
 #include "hotgauge/compensate/compensate.hpp"
+#include "hotgauge/core/part.hpp"
 #include "hotgauge/core/result.hpp"
 #include "hotgauge/plant/mqtt.hpp"
 #include "hotgauge/plc/pyrometer.hpp"
@@ -100,6 +101,14 @@ std::string files_hash(const std::vector<std::filesystem::path>& files, const st
 // The recipe file's 16-bit revision for the PLC (input 118, `hotgauge plc map --recipe`): its
 // bytes' FNV-1a, folded; any edit changes it (with odds 1 in 65 536 of a repeat).
 std::uint16_t recipe_revision(const std::filesystem::path& recipe_file);
+
+// A recipe as this cell can run it (issue 40): at most plc::kMaxFeatures features, each on its
+// own slot within the register map's kMaxFeatures blocks, and, with `faces` (hotgauged.yaml's
+// `faces:`), every face a feature needs among those the cell scans (a forging's diameter needs
+// only its first face). The error names the recipe file, the feature and its slot or face.
+core::Result<void> check_recipe_for_cell(const core::Recipe& recipe,
+                                         const std::filesystem::path& file,
+                                         const std::vector<std::string>* faces);
 
 // Reads and validates; errors name file:line and the key. Referenced files (recipes, models,
 // the calibration) must exist; their content is checked by their own readers at start.
