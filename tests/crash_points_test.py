@@ -9,7 +9,7 @@ shim (tests/crash_shim.c: a glob on the file's path, the operation, the mode), a
 that the test creates just before the part, so the start's own writes pass. The points:
 
   .sequence write and sync (the number reserved), the day's JSON line write and sync (the
-  commit), the CSV row, the archive's .partial folder, a file in it, their sync and the rename,
+  commit), the CSV row's write and sync (after the PLC's registers), the archive's .partial folder, a file in it, their sync and the rename,
   the plant spool's append and sync, and, after the broker's acknowledgement, spool.last and
   spool.cursor (on the publisher's thread: the part before's, or this one's).
 
@@ -56,6 +56,7 @@ POINTS = [
     ("JSON line write", "*/results/[0-9]*.jsonl", "write", False),
     ("JSON line sync", "*/results/[0-9]*.jsonl", "sync", False),
     ("CSV row write", "*/results/[0-9]*.csv", "write", True),
+    ("CSV row sync", "*/results/[0-9]*.csv", "sync", True),
     ("archive folder", "*/archive/*.partial", "mkdir", True),
     ("archive file", "*/archive/*.partial/*", "write", True),
     ("archive sync", "*/archive/*.partial*", "sync", True),
@@ -191,6 +192,35 @@ def taken_then_killed(line, plc, conveyor, part_id):
         plc2.close()
 
 
+def killed_twice(line, plc, sub, conveyor, part_id):
+    """Killed after a part's commit, restarted, killed again while idle before the PLC triggered
+    the part again, restarted: the part triggered again is still shown its committed result."""
+    csv_row = next(p for p in POINTS if p[0] == "CSV row write")
+    plc.close()
+    line.daemon.proc.kill()
+    line.daemon.proc.wait(10)
+    start_daemon(line, csv_row, "kill")
+    plc = vl.Plc(line.plc_port)
+    crash(line, plc, conveyor, csv_row, "kill", part_id)
+    plc.close()
+    for _ in range(2):  # the restart after the crash, and the one after a kill while idle
+        line.start_daemon()
+        plc = vl.Plc(line.plc_port)
+        parts = check_files(line, sub, plc)
+        plc.close()
+        line.daemon.proc.kill()
+        line.daemon.proc.wait(10)
+    line.start_daemon()
+    plc = vl.Plc(line.plc_port)
+    mine = [p for p in parts if p["part"]["part_id"] == str(part_id)]
+    assert len(mine) == 1, f"part {part_id}: {len(mine)} lines"
+    r = vl.run_part(plc, conveyor, 1, part_id)
+    assert r["state"] == vl.DONE and r["sequence"] == mine[0]["sequence"] & 0xFFFF, \
+        f"after two restarts: seq {r['sequence']}, committed {mine[0]['sequence']}"
+    assert json.loads(committed(line)[-1])["sequence"] == mine[0]["sequence"], "measured again"
+    return plc
+
+
 def main():
     workdir = tempfile.mkdtemp(prefix="hotgauge-crash-")
     line = vl.Line(BIN_DIR, workdir, ADDRESS, archive_every_nth_ok=1)
@@ -282,8 +312,11 @@ def main():
                 taken_then_killed(line, plc, conveyor, part_id + 1)
                 print("killed while idle after the PLC took a part's result: the same part "
                       "triggered again is measured anew", flush=True)
+                plc = killed_twice(line, plc, sub, conveyor, part_id + 2)
+                print("killed after a commit, then again while idle before the part came back: "
+                      "it is still shown its committed result", flush=True)
             except (AssertionError, TimeoutError) as e:
-                failures.append(f"killed after the PLC took the result: {e}")
+                failures.append(f"after the points: {e}")
         plc.close()
         conveyor.close()
     finally:

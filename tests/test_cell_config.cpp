@@ -378,20 +378,21 @@ TEST(RecipeForTheCell, SlotsWithinTheRegisterMapAndFacesTheCellScans) {
     more.features.back().slot = 17;
     auto seventeen = cell::check_recipe_for_cell(more, "r.yaml", &top);
     ASSERT_FALSE(seventeen.ok());
-    EXPECT_NE(seventeen.error().message.find("17 features; the PLC's register map holds 16"),
+    EXPECT_NE(seventeen.error().message.find(
+                  "17 features (the 17th: 'F17'); the PLC's register map holds 16"),
               std::string::npos)
         << seventeen.error().message;
     auto high = r;
     high.features[15].slot = 40;
-    EXPECT_NE(cell::check_recipe_for_cell(high, "r.yaml", &top)
-                  .error()
-                  .message.find("feature 'F16': slot 40 is outside 1..16"),
+    const auto past = cell::check_recipe_for_cell(high, "r.yaml", &top);
+    ASSERT_FALSE(past.ok());
+    EXPECT_NE(past.error().message.find("feature 'F16': slot 40 is outside 1..16"),
               std::string::npos);
     auto twice = r;
     twice.features[15].slot = 3;
-    EXPECT_NE(cell::check_recipe_for_cell(twice, "r.yaml", nullptr)
-                  .error()
-                  .message.find("features 'F3' and 'F16' are both on slot 3"),
+    const auto shared = cell::check_recipe_for_cell(twice, "r.yaml", nullptr);
+    ASSERT_FALSE(shared.ok());
+    EXPECT_NE(shared.error().message.find("features 'F3' and 'F16' are both on slot 3"),
               std::string::npos);
     // A forging's diameter needs only its first face: the others give its wall, for the draft.
     auto forged = r;

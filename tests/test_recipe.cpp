@@ -115,9 +115,9 @@ TEST(Recipe, Mistakes) {
               std::string::npos);
     EXPECT_NE(error_after("diameter_mm: 43.9", "diameter_mm: abc").find("expected a finite number"),
               std::string::npos);
-    EXPECT_NE(
-        error_after("slot: 2,", "slot: 1,").find("on slot 1, which is feature 'Diameter 1''s"),
-        std::string::npos);
+    EXPECT_NE(error_after("slot: 2,", "slot: 1,")
+                  .find("on slot 1, which feature 'Diameter 1' has already"),
+              std::string::npos);
     EXPECT_NE(
         error_after("tolerance_mm: [-0.5, 0.5]", "tolerance_mm: [0.5, 0.5]").find("tolerance_mm"),
         std::string::npos);

@@ -37,8 +37,8 @@ core::Result<void> check_recipe_for_cell(const core::Recipe& recipe, const fs::p
     const std::string map = "the PLC's register map holds " + std::to_string(plc::kMaxFeatures) +
                             " feature blocks (docs/plc-modbus.md)";
     if (recipe.features.size() > static_cast<std::size_t>(plc::kMaxFeatures))
-        return core::make_error(where + std::to_string(recipe.features.size()) + " features; " +
-                                map);
+        return core::make_error(where + std::to_string(recipe.features.size()) +
+                                " features (the 17th: '" + recipe.features[16].name + "'); " + map);
     std::map<int, std::string> slots;
     for (const auto& f : recipe.features) {
         if (f.slot < 1 || f.slot > plc::kMaxFeatures)

@@ -302,6 +302,7 @@ struct Daemon::Impl {
     std::optional<Unfinished> unfinished;         // under stats_mutex
     std::atomic<std::uint64_t> committed_seq{0};  // the last sequence whose result committed
     std::uint64_t taken_failed = 0;               // control thread: taken() failed for it
+    std::uint64_t open_cycle = 0;  // control thread: the number whose cycle this run opened
     void mark_taken(plc::State st);
     void find_unfinished(const fs::path& dir);
     bool show_again(const plc::TriggerRequest& t, const Unfinished& u);
@@ -493,6 +494,7 @@ void Daemon::Impl::on_event(const plc::PlcEvent& ev) {
     job.setup = setup;
     job.triggered = Clock::now();
     job.sequence = *sequence;
+    open_cycle = job.sequence;
     if (same_part && before->committed_line.empty()) job.remeasure_of = before->sequence;
     {
         std::lock_guard lock(stats_mutex);
@@ -531,7 +533,9 @@ void Daemon::Impl::refuse(const plc::TriggerRequest& t, const std::string& recip
 void Daemon::Impl::mark_taken(plc::State st) {
     if (st != plc::State::kIdle || !sequences || !sequences->last().unfinished()) return;
     const std::uint64_t n = sequences->reserved();
-    if (committed_seq != n || taken_failed == n) return;
+    // Only a cycle this run opened (or showed again): a number the last run left open stays so
+    // until its part is triggered again.
+    if (open_cycle != n || committed_seq != n || taken_failed == n) return;
     if (auto ok = sequences->taken(); !ok) {
         taken_failed = n;  // said once; the next part's number rewrites the line
         spdlog::warn("{}", ok.error().message);
@@ -574,6 +578,7 @@ bool Daemon::Impl::show_again(const plc::TriggerRequest& t, const Unfinished& u)
                            : "cannot be shown again (" + shown.error().message + ")");
         return false;
     }
+    open_cycle = u.sequence;  // taken once the PLC acknowledges it
     std::string outcome;
     if (auto ok = server->finish(t.trigger_id, shown->result); !ok) {
         outcome = "not published: " + ok.error().message;
@@ -694,13 +699,10 @@ void Daemon::Impl::shutdown() {
     if (acquisition_thread.joinable()) acquisition_thread.join();
     if (processing_thread.joinable()) processing_thread.join();
     if (accel) accel->stop();
-    // No part left unfinished (none in its cycle, none waiting to be measured again): the next
-    // start need not ask.
-    const bool pending = [this] {
-        std::lock_guard lock(stats_mutex);
-        return unfinished.has_value();
-    }();
-    if (sequences && in_flight == 0 && !pending)
+    // A result the PLC has not taken yet (or a part to measure again) stays open for the next
+    // start, clean stop or not.
+    mark_taken(server->state());
+    if (sequences && in_flight == 0 && sequences->last().state == 'D')
         if (auto ok = sequences->stopped(); !ok) spdlog::warn("{}", ok.error().message);
     web.reset();    // the page shows the state up to the last part
     plant.reset();  // the broker is told "offline"; what is spooled stays for the next start
@@ -1224,11 +1226,12 @@ void Daemon::Impl::process(Captured c) {
     bool problem = true;
     const std::string outcome = publish(c, entry, stored, shown, problem);
     const std::int64_t published = core::realtime_ns();
-    if (archiving && stored) {  // the archive follows from the commit
+    if (stored) log->sync_csv();  // off the PLC's wait: the row derived from the commit
+    if (archiving && stored) {    // the archive follows from the commit
         if (auto where = archive->store(c.rec, job.sequence, t_result); !where) {
             spdlog::error("seq {}: raw archive: {} (the results line names {})", job.sequence,
                           where.error().message, *entry.archived_as);
-            archive->complete({log->last_line()}, "writing it failed: " + where.error().message);
+            archive->not_archived(log->last_line(), "writing it failed: " + where.error().message);
         }
     }
     {

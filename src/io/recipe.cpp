@@ -250,8 +250,8 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
                 y.fail(fl[i], w + ".name: duplicate feature name '" + f.name + "'");
             if (auto [it, fresh] = slots.emplace(f.slot, f.name); !fresh)
                 y.fail(fl[i]["slot"], w + ".slot: feature '" + f.name + "' on slot " +
-                                          std::to_string(f.slot) + ", which is feature '" +
-                                          it->second + "''s already");
+                                          std::to_string(f.slot) + ", which feature '" +
+                                          it->second + "' has already");
             r.features.push_back(std::move(f));
         }
         return r;

@@ -149,44 +149,57 @@ core::Result<fs::path> RawArchive::store(const core::Recording& rec, std::uint64
     return where;
 }
 
-std::vector<fs::path> RawArchive::complete(const std::vector<std::string>& lines,
-                                           const std::string& why) {
-    // Only the lines after the newest folder still there: the quota deletes the oldest first, so
-    // a folder missing before it was deleted, not left unwritten.
-    std::vector<nlohmann::json> named;
-    std::error_code ec;
-    for (const auto& text : lines) {
-        auto j = nlohmann::json::parse(text, nullptr, false);
-        if (!j.is_object() || !j.contains("archived_as") || !j["archived_as"].is_string()) continue;
-        if (fs::exists(j["archived_as"].get<std::string>(), ec))
-            named.clear();
-        else
-            named.push_back(std::move(j));
-    }
+std::vector<fs::path> RawArchive::complete(const std::vector<std::string>& lines) {
+    // A folder missing after one still there, or with its .partial left: never written. The
+    // quota deletes the oldest first, so one missing before every folder still there (and without
+    // a .partial) was deleted for it.
     std::vector<fs::path> marked;
-    for (const auto& j : named) {
-        const fs::path where = j["archived_as"].get<std::string>();
-        fs::path partial = where;
-        partial += ".partial";
-        fs::remove_all(partial, ec);
-        fs::create_directories(where, ec);
-        std::ofstream note(where / kNotArchived);
-        note << "The raw recording of part " << j.value("/part/part_id"_json_pointer, std::string())
-             << " (sequence " << j.value("sequence", 0ull) << ", " << j.value("time", std::string())
-             << ") was not archived: " << why << " (noted "
-             << core::iso8601_utc(core::realtime_ns())
-             << "). The part's result is in the results files.\n";
-        note.close();
-        if (!note) {
-            log().error("{}: the part's recording is not there, and this could not be said in it",
-                        where.string());
-            continue;
-        }
-        log().warn("{}: the part's recording is not there ({}); {} says so", where.string(), why,
-                   kNotArchived);
-        marked.push_back(where);
+    std::error_code ec;
+    bool after_one_there = false;
+    for (const auto& text : lines) {
+        const auto j = nlohmann::json::parse(text, nullptr, false);
+        if (!j.is_object() || !j.contains("archived_as") || !j["archived_as"].is_string()) continue;
+        const std::string where = j["archived_as"].get<std::string>();
+        if (fs::exists(where, ec))
+            after_one_there = true;
+        else if ((after_one_there || fs::exists(where + ".partial", ec)) &&
+                 note(text,
+                      "hotgauged stopped (a crash, a kill, a power cut) after the part's result "
+                      "was committed and before its recording was written; found at the next "
+                      "start"))
+            marked.push_back(where);
     }
     return marked;
+}
+
+bool RawArchive::not_archived(const std::string& line, const std::string& why) {
+    return note(line, why);
+}
+
+// The line's folder with NOT_ARCHIVED.txt saying why (its .partial deleted); no folder when the
+// note cannot be written.
+bool RawArchive::note(const std::string& line, const std::string& why) {
+    const auto j = nlohmann::json::parse(line, nullptr, false);
+    if (!j.is_object() || !j.contains("archived_as") || !j["archived_as"].is_string()) return false;
+    const fs::path where = j["archived_as"].get<std::string>();
+    std::error_code ec;
+    fs::remove_all(where.string() + ".partial", ec);
+    fs::create_directories(where, ec);
+    std::ofstream out(where / kNotArchived);
+    out << "The raw recording of part " << j.value("/part/part_id"_json_pointer, std::string())
+        << " (sequence " << j.value("sequence", 0ull) << ", " << j.value("time", std::string())
+        << ") was not archived: " << why << " (noted " << core::iso8601_utc(core::realtime_ns())
+        << "). The part's result is in the results files.\n";
+    out.close();
+    if (!out) {
+        fs::remove_all(where, ec);
+        log().error("{}: the part's recording is not there, and this could not be said in it",
+                    where.string());
+        return false;
+    }
+    log().warn("{}: the part's recording is not there ({}); {} says so", where.string(), why,
+               kNotArchived);
+    return true;
 }
 
 }  // namespace hotgauge::results

@@ -457,6 +457,12 @@ core::Result<void> ResultsLog::write_owed() {
     return {};
 }
 
+void ResultsLog::sync_csv() {
+    if (auto f = files_.find(last_csv_); config_.sync && f != files_.end())
+        if (::fdatasync(f->second.fd) != 0)
+            log().warn("{}: not synced: {}", last_csv_.string(), errno_text(errno));
+}
+
 core::Result<void> ResultsLog::append(const ResultEntry& e) {
     if (!e.result) return core::make_error("results: an entry without a result");
     const nlohmann::json j = entry_json(e);

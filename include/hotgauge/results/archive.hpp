@@ -36,14 +36,15 @@ class RawArchive {
     std::filesystem::path folder(const std::string& part_id, std::uint64_t sequence,
                                  std::int64_t time_ns) const;
     // After a crash (or a store() that failed): every committed results line (JSON text,
-    // results::last_result_lines) that names an archive folder which is not there, newer than
-    // every folder that is, gets that folder with a file NOT_ARCHIVED.txt saying `why`, and a
-    // .partial folder left behind is deleted. Returns the folders so marked.
-    std::vector<std::filesystem::path> complete(const std::vector<std::string>& committed_lines,
-                                                const std::string& why = kStoppedBeforeWritten);
-    static constexpr const char* kStoppedBeforeWritten =
-        "hotgauged stopped (a crash, a kill, a power cut) after the part's result was committed "
-        "and before its recording was written; found at the next start";
+    // results::last_result_lines) that names an archive folder which is not there (after a line
+    // whose folder is, or with its .partial left: the quota deletes the oldest first) gets that
+    // folder with a file NOT_ARCHIVED.txt saying `why`, and the .partial is deleted. A note that
+    // cannot be written leaves no folder, for the next start to try again. Returns the folders
+    // so marked.
+    std::vector<std::filesystem::path> complete(const std::vector<std::string>& committed_lines);
+    // A store() that failed while the daemon runs: the line's folder gets NOT_ARCHIVED.txt saying
+    // `why` now. False when that could not be written either (the next start tries again).
+    bool not_archived(const std::string& committed_line, const std::string& why);
     static constexpr const char* kNotArchived = "NOT_ARCHIVED.txt";
     // Bytes the archived recordings take now.
     std::uint64_t used_bytes() const;
@@ -51,6 +52,7 @@ class RawArchive {
 
   private:
     explicit RawArchive(ArchiveConfig config) : config_(std::move(config)) {}
+    bool note(const std::string& line, const std::string& why);
     ArchiveConfig config_;
 };
 

@@ -77,6 +77,10 @@ class ResultsLog {
     // the next part's, and named by csv_error().
     core::Result<void> append(const ResultEntry& entry);
 
+    // The last append's CSV row to the disk: called once the PLC has the result, off its wait
+    // (so a power cut can lose at most the newest part's row, which the next open() writes).
+    void sync_csv();
+
     // The files the last append wrote (tests, logs), and its JSON line.
     const std::filesystem::path& last_csv() const { return last_csv_; }
     const std::filesystem::path& last_jsonl() const { return last_jsonl_; }
