@@ -823,6 +823,7 @@ def print_report(rep):
     print(f"parts in: {rep['parts']} ({f['triggers']} triggers); results out: "
           f"{f['rows_json']} JSON lines, {f['rows_csv']} CSV rows (sequence "
           f"{f['sequence_first_last']}); lost {f['lost']}; duplicated {f['duplicated']}; "
+          f"reused {f['reused']} (of {f['sequences_given']} numbers given); "
           f"false NOK {f['false_nok']} (of {f['nok_features']} NOK features)")
     print(f"sequence numbers not in the files: {f['sequence_gaps']}")
     print("after each restart, before a DONE: " + "; ".join(
@@ -1026,14 +1027,16 @@ def print_lines_summary(summary):
     for x in lines:
         f = x["figures"]
         print(f"{x['folder']}: exit {x['exit']}, {x['parts']} parts, lost {f.get('lost')}, "
-              f"duplicated {f.get('duplicated')}, false NOK {f.get('false_nok')}, worst trusted "
+              f"duplicated {f.get('duplicated')}, reused {f.get('reused')}, false NOK "
+              f"{f.get('false_nok')}, worst trusted "
               f"error {f.get('worst_trusted_error_mm')} mm, RSS {f.get('rss', {}).get('change')}")
     worst = collections.defaultdict(float)  # by fault kind, over every line
     for x in lines:
         for kind, mm in (x["figures"].get("worst_trusted_error_mm") or {}).items():
             worst[kind] = max(worst[kind], mm)
     print(f"all lines: {sum(x['parts'] for x in lines)} parts, lost {total('lost')}, duplicated "
-          f"{total('duplicated')}, false NOK {total('false_nok')}; worst trusted error by fault "
+          f"{total('duplicated')}, reused {total('reused')}, false NOK {total('false_nok')}; "
+          f"worst trusted error by fault "
           f"(mm): {dict(sorted(worst.items()))}")
     for check, items in summary["failures"].items():
         print(f"FAILED {check}: {len(items)}")
