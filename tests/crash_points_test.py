@@ -274,7 +274,7 @@ def main():
                     # killed before the JSON line's sync: written, so committed (a kill, not a
                     # power cut)
                     assert point[3] is not False or (mode, point[0]) == ("kill", "JSON line sync"), \
-                        f"committed although stopped before the commit"
+                        "committed although stopped before the commit"
                 elif point[3]:
                     raise AssertionError("stopped after the commit, yet no line")
                 if state == vl.DONE:
