@@ -118,6 +118,22 @@ struct Spool::Impl {
         return std::nullopt;  // no newline before the end: not a whole line
     }
 
+    // Just past the last '\n' before offset `end` (0 when there is none), read block by block
+    // from the end; nullopt on a read error.
+    std::optional<std::uint64_t> line_start_before(std::uint64_t end) const {
+        char buf[4096];
+        while (end > 0) {
+            const std::uint64_t from = end > sizeof buf ? end - sizeof buf : 0;
+            const auto n = static_cast<std::size_t>(end - from);
+            if (::pread(fd, buf, n, static_cast<off_t>(from)) != static_cast<ssize_t>(n))
+                return std::nullopt;
+            if (const void* nl = ::memrchr(buf, '\n', n))
+                return from + static_cast<std::uint64_t>(static_cast<const char*>(nl) - buf) + 1;
+            end = from;
+        }
+        return 0;
+    }
+
     core::Result<void> recover();
     core::Result<void> cut_torn_line();
     void count_depth();
@@ -126,19 +142,9 @@ struct Spool::Impl {
 // A last line without its '\n' is what a power cut during append() leaves: it was never
 // acknowledged to the caller as durable, so it is dropped.
 core::Result<void> Spool::Impl::cut_torn_line() {
-    std::uint64_t end = size;  // after the last '\n', found block by block from the end
-    char buf[4096];
-    while (end > 0) {
-        const std::uint64_t from = end > sizeof buf ? end - sizeof buf : 0;
-        const auto n = static_cast<std::size_t>(end - from);
-        if (::pread(fd, buf, n, static_cast<off_t>(from)) != static_cast<ssize_t>(n))
-            return core::make_error(file.string() + ": cannot read: " + errno_text());
-        if (const void* nl = ::memrchr(buf, '\n', n)) {
-            end = from + static_cast<std::uint64_t>(static_cast<const char*>(nl) - buf) + 1;
-            break;
-        }
-        end = from;
-    }
+    const auto last = line_start_before(size);  // after the last '\n'
+    if (!last) return core::make_error(file.string() + ": cannot read: " + errno_text());
+    const std::uint64_t end = *last;
     if (end == size) return {};
     if (::ftruncate(fd, static_cast<off_t>(end)) != 0 || ::fsync(fd) != 0)
         return core::make_error(file.string() +
@@ -269,21 +275,9 @@ core::Result<void> Spool::pop() {
 std::optional<std::string> Spool::last_appended() const {
     std::lock_guard lock(impl_->mutex);
     const Impl& s = *impl_;
-    if (s.size > 0) {  // the line that ends at the end of the file: its start, block by block
-        std::uint64_t start = s.size - 1;  // before the last '\n'
-        char buf[4096];
-        while (start > 0) {
-            const std::uint64_t from = start > sizeof buf ? start - sizeof buf : 0;
-            const auto n = static_cast<std::size_t>(start - from);
-            if (::pread(s.fd, buf, n, static_cast<off_t>(from)) != static_cast<ssize_t>(n))
-                return std::nullopt;
-            if (const void* nl = ::memrchr(buf, '\n', n)) {
-                start = from + static_cast<std::uint64_t>(static_cast<const char*>(nl) - buf) + 1;
-                break;
-            }
-            start = from;
-        }
-        return s.line_at(start);
+    if (s.size > 0) {  // the line that ends at the end of the file (before its '\n')
+        const auto start = s.line_start_before(s.size - 1);
+        return start ? s.line_at(*start) : std::nullopt;
     }
     std::ifstream kept(s.config.dir / "spool.last");
     std::string line;

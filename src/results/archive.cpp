@@ -163,22 +163,19 @@ std::vector<fs::path> RawArchive::complete(const std::vector<std::string>& lines
         if (fs::exists(where, ec))
             after_one_there = true;
         else if ((after_one_there || fs::exists(where + ".partial", ec)) &&
-                 note(text,
-                      "hotgauged stopped (a crash, a kill, a power cut) after the part's result "
-                      "was committed and before its recording was written; found at the next "
-                      "start"))
+                 not_archived(
+                     text,
+                     "hotgauged stopped (a crash, a kill, a power cut) after the part's result "
+                     "was committed and before its recording was written; found at the next "
+                     "start"))
             marked.push_back(where);
     }
     return marked;
 }
 
-bool RawArchive::not_archived(const std::string& line, const std::string& why) {
-    return note(line, why);
-}
-
 // The line's folder with NOT_ARCHIVED.txt saying why (its .partial deleted); no folder when the
 // note cannot be written.
-bool RawArchive::note(const std::string& line, const std::string& why) {
+bool RawArchive::not_archived(const std::string& line, const std::string& why) {
     const auto j = nlohmann::json::parse(line, nullptr, false);
     if (!j.is_object() || !j.contains("archived_as") || !j["archived_as"].is_string()) return false;
     const fs::path where = j["archived_as"].get<std::string>();

@@ -52,7 +52,6 @@ class RawArchive {
 
   private:
     explicit RawArchive(ArchiveConfig config) : config_(std::move(config)) {}
-    bool note(const std::string& line, const std::string& why);
     ArchiveConfig config_;
 };
 
