@@ -2,13 +2,16 @@
 #   make demo   install missing packages, build, run 12 hub-a parts through the virtual line
 #   make test   install missing packages, build (release and sanitizer builds), run every test,
 #               the fuzz harnesses' corpus replay among them (ctest fuzz_replay_*)
-#   make fuzz   build the libFuzzer harnesses (clang) and run each for FUZZ_SECONDS
+#   make fuzz   build the libFuzzer harnesses (clang, the volume build) and run each for
+#               FUZZ_SECONDS; what they find goes into the corpus, what they ran into the ledger
 #               (tests/fuzz/README.md)
 SHELL := /bin/bash
 BUILD ?= build
 BUILD_ASAN ?= build-asan
 BUILD_FUZZ ?= build-fuzz
+BUILD_FUZZ_VOLUME ?= build-fuzz-volume
 FUZZ_SECONDS ?= 600
+FUZZ_PARALLEL ?= 1
 FUZZ_BRIEF_SECONDS ?= 6
 JOBS ?= $(shell nproc)
 
@@ -29,7 +32,7 @@ ORACLE_PACKAGES := python3-statsmodels
 
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: deps deps-fuzz oracle-refs install-missing build build-asan build-fuzz demo test fuzz fuzz-brief bench format clean soak
+.PHONY: deps deps-fuzz oracle-refs install-missing build build-asan build-fuzz build-fuzz-volume demo test fuzz fuzz-brief fuzz-ledger bench format clean soak
 
 deps:
 	@$(MAKE) -s install-missing PACKAGES="$(DEB_PACKAGES)"
@@ -84,14 +87,31 @@ $(BUILD_FUZZ)/CMakeCache.txt:
 build-fuzz: deps-fuzz $(BUILD_FUZZ)/CMakeCache.txt
 	cmake --build $(BUILD_FUZZ) -j $(JOBS) --target hotgauge_fuzzers
 
-# Each harness for FUZZ_SECONDS on a scratch copy of its seeds; findings in $(BUILD_FUZZ)/fuzz-findings.
-fuzz: build-fuzz
-	tests/fuzz/run.sh $(BUILD_FUZZ) $(FUZZ_SECONDS)
+# The volume build: coverage instrumentation only, -O2, for executions per second. What it finds
+# is replayed in the sanitizer build above (tests/fuzz/README.md).
+$(BUILD_FUZZ_VOLUME)/CMakeCache.txt:
+	CC=clang-14 CXX=clang++-14 cmake -S . -B $(BUILD_FUZZ_VOLUME) -DHOTGAUGE_FUZZ=ON \
+	  -DHOTGAUGE_FUZZ_SANITIZE=OFF -DHOTGAUGE_TESTS=OFF -DHOTGAUGE_BENCH=OFF
 
-# Each libFuzzer harness for FUZZ_BRIEF_SECONDS. make test replays the corpora instead (ctest
-# fuzz_replay_*: each file and 250 damaged variants, under ASan/UBSan), without a clang build.
+build-fuzz-volume: deps-fuzz $(BUILD_FUZZ_VOLUME)/CMakeCache.txt
+	cmake --build $(BUILD_FUZZ_VOLUME) -j $(JOBS) --target hotgauge_fuzzers
+
+# Each harness for FUZZ_SECONDS (FUZZ_PARALLEL at once) in the volume build; new coverage merged
+# into tests/fuzz/corpus, a line per harness appended to tests/fuzz/ledger.tsv: commit both.
+# Findings in $(BUILD_FUZZ_VOLUME)/fuzz-findings.
+fuzz: build-fuzz-volume
+	FUZZ_PARALLEL=$(FUZZ_PARALLEL) tests/fuzz/run.sh $(BUILD_FUZZ_VOLUME) $(FUZZ_SECONDS)
+	/usr/bin/python3 tests/fuzz/ledger.py || true
+
+# What the ledger adds up to for this commit's readers (goal 10^7 executions each).
+fuzz-ledger:
+	/usr/bin/python3 tests/fuzz/ledger.py
+
+# Each libFuzzer harness for FUZZ_BRIEF_SECONDS under ASan/UBSan, corpus and ledger left alone.
+# make test replays the corpora instead (ctest fuzz_replay_*: each file and 20 000 damaged
+# variants per harness, under ASan/UBSan), without a clang build.
 fuzz-brief: build-fuzz
-	tests/fuzz/run.sh $(BUILD_FUZZ) $(FUZZ_BRIEF_SECONDS)
+	FUZZ_NO_LEDGER=1 tests/fuzz/run.sh $(BUILD_FUZZ) $(FUZZ_BRIEF_SECONDS)
 
 # The main job on the built-in simulated cell: the virtual production line. The virtual cell
 # (GigE Vision camera, accelerometer stream, axis with its part conveyor, pyrometer on a socat
@@ -143,4 +163,4 @@ format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')
 
 clean:
-	rm -rf $(BUILD) $(BUILD_ASAN) $(BUILD_FUZZ)
+	rm -rf $(BUILD) $(BUILD_ASAN) $(BUILD_FUZZ) $(BUILD_FUZZ_VOLUME)

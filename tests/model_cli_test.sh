@@ -86,7 +86,7 @@ expect_error "$tmp/v1.hgm: model format version 1, this build reads 2: rebuild w
   info "$tmp/v1.hgm"
 echo "not a model" > "$tmp/text.hgm"
 expect_error "$tmp/text.hgm: not a hotgauge model file" info "$tmp/text.hgm"
-expect_error "$tmp/none.hgm: no such file" info "$tmp/none.hgm"
+expect_error "$tmp/none.hgm: missing" info "$tmp/none.hgm"
 expect_error "$tmp/none.stl: no such file" build --mesh "$tmp/none.stl" --out "$tmp/x.hgm"
 # Files PCL (PLY, PCD) or VTK (STL) cannot read: our one line naming the file, nothing of
 # theirs on stderr (pcl::console silenced, VTK's errors caught by an observer).

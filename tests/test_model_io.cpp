@@ -366,7 +366,7 @@ TEST_F(ModelFile, EveryBadFileIsAClearError) {
         return msg.find(what) != std::string::npos;
     };
 
-    EXPECT_TRUE(has(error_of(read_model(path("none.hgm"))), "no such file"));
+    EXPECT_TRUE(has(error_of(read_model(path("none.hgm"))), "none.hgm: missing"));
     EXPECT_TRUE(has(error_for({}), "empty file"));
 
     Bytes b = bytes;

@@ -1,6 +1,7 @@
 // .npy v1.0 reader/writer: round trips, header parsing variants, byte-identity with numpy.save,
 // and every rejection path naming the file and the problem.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -269,6 +270,26 @@ TEST(Npy, RejectsMalformedFiles) {
     auto missing = read_npy(tmp.path / "nope.npy");
     ASSERT_FALSE(missing.ok());
     EXPECT_EQ(missing.error().message, (tmp.path / "nope.npy").string() + ": missing");
+}
+
+// What every file reader reads through (io::read_bytes): a folder or a FIFO is no file, and the
+// FIFO is refused at once, not after a writer comes; a large file (mapped) reads as a small one.
+TEST(Npy, OnlyRegularFilesAreRead) {
+    TempDir tmp;
+    ASSERT_EQ(::mkfifo((tmp.path / "fifo.npy").c_str(), 0600), 0);
+    std::filesystem::create_directory(tmp.path / "dir.npy");
+    for (const char* name : {"fifo.npy", "dir.npy"}) {
+        auto r = read_npy(tmp.path / name);
+        ASSERT_FALSE(r.ok());
+        EXPECT_EQ(r.error().message, (tmp.path / name).string() + ": not a regular file");
+    }
+    std::vector<float> big(300'000);
+    for (std::size_t i = 0; i < big.size(); ++i) big[i] = static_cast<float>(i) * 0.5f;
+    ASSERT_TRUE(write_npy(tmp.path / "big.npy", "<f4", {300'000}, big.data(), big.size() * 4).ok());
+    auto back = read_npy(tmp.path / "big.npy");
+    ASSERT_TRUE(back.ok()) << back.error().message;
+    ASSERT_EQ(back->data.size(), big.size() * 4);
+    EXPECT_EQ(std::memcmp(back->data.data(), big.data(), back->data.size()), 0);
 }
 
 TEST(Npy, WriteRejectsSizeMismatch) {

@@ -184,6 +184,36 @@ TEST(RecordingIo, RoundTripIsBitExact) {
 
 // Issue 18, finding 7: ±Inf in profiles.npy was counted as a point. A point is two finite
 // numbers: an infinite value reads as NaN, the format's "no point".
+// The reader on files in memory (the fuzz harness's entry point) reads what write_recording's
+// files say, as the one on disk does; a file the source lacks is an error naming it.
+TEST(RecordingIo, FilesInMemoryReadAsOnDisk) {
+    TempDir tmp;
+    const Recording rec = make_recording();
+    ASSERT_TRUE(write_recording(rec, tmp.path / "part").ok());
+    auto on_disk = read_recording(tmp.path / "part");
+    ASSERT_TRUE(on_disk.ok()) << on_disk.error().message;
+    auto files = hotgauge::io::recording_files(rec, "mem");
+    ASSERT_TRUE(files.ok()) << files.error().message;
+    EXPECT_EQ(files->back().first, fs::path("mem/part.yaml"));  // the last one written
+    for (const auto& [path, bytes] : *files)
+        EXPECT_EQ(slurp(tmp.path / "part" / path.lexically_relative("mem")), bytes) << path;
+    std::string left_out;
+    const hotgauge::io::FileSource source =
+        [&](const fs::path& path) -> hotgauge::core::Result<hotgauge::io::Bytes> {
+        for (const auto& [p, bytes] : *files)
+            if (p == path && p.string() != left_out) return hotgauge::io::Bytes::view(bytes);
+        return hotgauge::core::make_error(path.string() + ": missing");
+    };
+    auto in_memory = read_recording("mem", source);
+    ASSERT_TRUE(in_memory.ok()) << in_memory.error().message;
+    expect_same(*on_disk, *in_memory);
+    EXPECT_EQ(on_disk->warnings.size(), in_memory->warnings.size());
+    left_out = "mem/top/accel_times.npy";
+    in_memory = read_recording("mem", source);
+    ASSERT_FALSE(in_memory.ok());
+    EXPECT_EQ(in_memory.error().message, "mem/top/accel_times.npy: missing");
+}
+
 TEST(RecordingIo, InfiniteProfileValuesAreNoPoints) {
     TempDir tmp;
     Recording rec = make_recording();

@@ -57,8 +57,8 @@ double surface_distance(const Artifact& a, std::size_t j, const Eigen::Vector3d&
     return pl.normal.dot(p - pl.point_mm);
 }
 
-core::Result<Artifact> read_artifact(const std::filesystem::path& file) {
-    const YamlReader y(file.string());
+core::Result<Artifact> parse_artifact(std::string_view text, const std::filesystem::path& file) {
+    const YamlReader y(file.string(), text);
     return y.guarded<Artifact>([&] {
         const YAML::Node root = y.load();
         y.expect_map(root, "artifact file", {"artifact", "spheres", "planes"});
@@ -90,6 +90,10 @@ core::Result<Artifact> read_artifact(const std::filesystem::path& file) {
         }
         return a;
     });
+}
+
+core::Result<Artifact> read_artifact(const std::filesystem::path& file) {
+    return io::parse_file(file, parse_artifact);
 }
 
 }  // namespace hotgauge::calib

@@ -180,8 +180,9 @@ const FaceGeometry* Calibration::face(const std::string& name) const {
     return nullptr;
 }
 
-core::Result<Calibration> read_calibration(const std::filesystem::path& file) {
-    const YamlReader y(file.string());
+core::Result<Calibration> parse_calibration(std::string_view text,
+                                            const std::filesystem::path& file) {
+    const YamlReader y(file.string(), text);
     return y.guarded<Calibration>([&] {
         const YAML::Node root = y.load();
         const std::string w = "calibration";
@@ -216,6 +217,10 @@ core::Result<Calibration> read_calibration(const std::filesystem::path& file) {
         }
         return c;
     });
+}
+
+core::Result<Calibration> read_calibration(const std::filesystem::path& file) {
+    return io::parse_file(file, parse_calibration);
 }
 
 core::Result<void> write_calibration(const Calibration& c, const std::filesystem::path& file) {

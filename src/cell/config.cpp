@@ -19,9 +19,7 @@ namespace fs = std::filesystem;
 using io::YamlReader;
 
 // FNV-1a over the file's bytes, as 16 hex digits: which configuration measured a part.
-std::string file_hash(const fs::path& file) {
-    std::ifstream in(file, std::ios::binary);
-    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+std::string text_hash(std::string_view bytes) {
     char out[17];
     std::snprintf(out, sizeof out, "%016llx",
                   static_cast<unsigned long long>(io::fnv1a64(
@@ -298,8 +296,9 @@ plant::MqttConfig read_mqtt(const YamlReader& y, const YAML::Node& m, const fs::
 
 }  // namespace
 
-core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
-    const YamlReader y(file.string());
+core::Result<DaemonConfig> parse_daemon_config(std::string_view text, const fs::path& file,
+                                               const io::PathExists& exists) {
+    const YamlReader y(file.string(), text, exists);
     return y.guarded<DaemonConfig>([&] {
         const YAML::Node root = y.load();
         y.expect_map(root, "hotgauged",
@@ -309,7 +308,7 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
                       "cell"});  // cell: moved to the calibration, refused below by name
         DaemonConfig c;
         c.file = file;
-        c.hash = file_hash(file);
+        c.hash = text_hash(text);
         const fs::path base = file.parent_path();
         if (root["cell"])
             y.fail(root["cell"],
@@ -445,6 +444,12 @@ core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
         if (const YAML::Node p = root["pipeline"]) c.pipeline = read_pipeline(y, p);
         if (const YAML::Node m = root["mqtt"]) c.mqtt = read_mqtt(y, m, base, c.results.dir);
         return c;
+    });
+}
+
+core::Result<DaemonConfig> read_daemon_config(const fs::path& file) {
+    return io::parse_file(file, [](std::string_view text, const fs::path& f) {
+        return parse_daemon_config(text, f);
     });
 }
 

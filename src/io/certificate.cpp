@@ -26,8 +26,9 @@ core::CertifiedFeature read_feature(const YamlReader& y, const YAML::Node& n,
 
 }  // namespace
 
-core::Result<core::MasterCertificate> read_certificate(const std::filesystem::path& file) {
-    const YamlReader y(file.string());
+core::Result<core::MasterCertificate> parse_certificate(std::string_view text,
+                                                        const std::filesystem::path& file) {
+    const YamlReader y(file.string(), text);
     return y.guarded<core::MasterCertificate>([&] {
         const YAML::Node root = y.load();
         const std::string w = "certificate";
@@ -57,6 +58,10 @@ core::Result<core::MasterCertificate> read_certificate(const std::filesystem::pa
         }
         return c;
     });
+}
+
+core::Result<core::MasterCertificate> read_certificate(const std::filesystem::path& file) {
+    return parse_file(file, parse_certificate);
 }
 
 }  // namespace hotgauge::io

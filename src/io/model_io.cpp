@@ -15,7 +15,7 @@
 #include <system_error>
 #include <vector>
 
-#include "file_bytes.hpp"
+#include "hotgauge/io/bytes.hpp"
 #include "hotgauge/io/checksum.hpp"
 
 namespace hotgauge::io {
@@ -232,10 +232,17 @@ std::uint64_t le64(const unsigned char* p) {
 
 }  // namespace
 
+Result<std::vector<unsigned char>> model_bytes(const Model& model, const fs::path& path) {
+    if (auto v = model.validate(); !v)
+        return make_error(path.string() + ": not saved: " + v.error().message);
+    return serialize(model);
+}
+
 Result<void> write_model(const Model& model, const fs::path& path) {
     const std::string where = path.string() + ": ";
-    if (auto v = model.validate(); !v) return make_error(where + "not saved: " + v.error().message);
-    const std::vector<unsigned char> bytes = serialize(model);
+    auto file = model_bytes(model, path);
+    if (!file) return file.error();
+    const std::vector<unsigned char>& bytes = *file;
     const fs::path tmp = path.string() + ".tmp";
     std::FILE* f = std::fopen(tmp.c_str(), "wb");
     if (!f) return make_error(tmp.string() + ": cannot open for writing: " + std::strerror(errno));
@@ -257,10 +264,13 @@ Result<void> write_model(const Model& model, const fs::path& path) {
 }
 
 Result<Model> read_model(const fs::path& path) {
-    const std::string where = path.string() + ": ";
-    auto file = detail::read_file_bytes(path);
+    auto file = read_bytes(path);
     if (!file) return file.error();
-    const std::vector<unsigned char>& b = *file;
+    return parse_model(file->data, path);
+}
+
+Result<Model> parse_model(std::span<const unsigned char> b, const fs::path& path) {
+    const std::string where = path.string() + ": ";
     const std::size_t n_magic = std::min(b.size(), kMagic.size());
     if (b.empty()) return make_error(where + "empty file, not a hotgauge model file");
     if (std::memcmp(b.data(), kMagic.data(), n_magic) != 0)

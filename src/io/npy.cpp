@@ -14,6 +14,8 @@
 #include <string_view>
 #include <system_error>
 
+#include "hotgauge/io/bytes.hpp"
+
 namespace hotgauge::io {
 namespace {
 
@@ -197,54 +199,27 @@ std::optional<std::uint64_t> data_bytes(const std::vector<std::int64_t>& shape,
 
 }  // namespace
 
-core::Result<NpyArray> read_npy(const std::filesystem::path& path) {
-    auto arr = read_npy_header(path);
-    if (!arr) return arr.error();
-    arr->data.resize(static_cast<std::size_t>(arr->data_bytes));
-    if (auto ok = read_npy_data(path, *arr, arr->data.data()); !ok) return ok.error();
-    return arr;
-}
-
-core::Result<void> read_npy_data(const std::filesystem::path& path, const NpyArray& header,
-                                 void* out) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) return make_error(where(path) + "cannot open for reading");
-    in.seekg(static_cast<std::streamoff>(header.data_offset));
-    in.read(static_cast<char*>(out), static_cast<std::streamsize>(header.data_bytes));
-    if (!in) return make_error(where(path) + "read error in .npy data");
-    return {};
-}
-
-core::Result<NpyArray> read_npy_header(const std::filesystem::path& path) {
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(path, ec)) return make_error(where(path) + "missing");
-    const std::uintmax_t file_size = std::filesystem::file_size(path, ec);
-    if (ec) return make_error(where(path) + "cannot read: " + ec.message());
-    std::ifstream in(path, std::ios::binary);
-    if (!in) return make_error(where(path) + "cannot open for reading");
-
-    std::array<unsigned char, kPreludeV1> prelude{};
-    const std::size_t got_prelude = std::min<std::uintmax_t>(file_size, kPreludeV1);
-    in.read(reinterpret_cast<char*>(prelude.data()), static_cast<std::streamsize>(got_prelude));
-    if (got_prelude < 8 || !std::equal(kMagic.begin(), kMagic.end(), prelude.begin()))
+core::Result<NpyArray> parse_npy_header(std::span<const unsigned char> file,
+                                        const std::filesystem::path& path) {
+    const std::size_t file_size = file.size();
+    if (file_size < 8 || !std::equal(kMagic.begin(), kMagic.end(), file.begin()))
         return make_error(where(path) + "not a .npy file (no \\x93NUMPY magic)");
-    const int major = prelude[6], minor = prelude[7];
+    const int major = file[6], minor = file[7];
     if (major != 1 || minor != 0)
         return make_error(where(path) + ".npy format version " + std::to_string(major) + "." +
                           std::to_string(minor) + ", recording format v1 requires 1.0");
-    if (got_prelude < kPreludeV1)
+    if (file_size < kPreludeV1)
         return make_error(where(path) + "truncated .npy header: file has " +
                           std::to_string(file_size) + " bytes");
     const std::size_t header_len =
-        static_cast<std::size_t>(prelude[8]) | (static_cast<std::size_t>(prelude[9]) << 8);
+        static_cast<std::size_t>(file[8]) | (static_cast<std::size_t>(file[9]) << 8);
     const std::uint64_t data_offset = kPreludeV1 + header_len;
     if (file_size < data_offset)
         return make_error(where(path) + "truncated .npy header: header length " +
                           std::to_string(header_len) + " needs " + std::to_string(data_offset) +
                           " bytes, file has " + std::to_string(file_size));
-    std::string header(header_len, '\0');
-    in.read(header.data(), static_cast<std::streamsize>(header_len));
-    if (!in) return make_error(where(path) + "read error in .npy header");
+    const std::string_view header(reinterpret_cast<const char*>(file.data()) + kPreludeV1,
+                                  header_len);
     for (char c : header)
         if (static_cast<unsigned char>(c) >= 0x80 || c == '\0')
             return make_error(where(path) + "malformed .npy header: not ASCII");
@@ -271,9 +246,24 @@ core::Result<NpyArray> read_npy_header(const std::filesystem::path& path) {
     return arr;
 }
 
-core::Result<void> write_npy(const std::filesystem::path& path, const std::string& descr,
-                             const std::vector<std::int64_t>& shape, const void* data,
-                             std::size_t bytes) {
+core::Result<NpyArray> parse_npy(std::span<const unsigned char> file,
+                                 const std::filesystem::path& path) {
+    auto arr = parse_npy_header(file, path);
+    if (!arr) return arr.error();
+    const auto data = file.subspan(arr->data_offset, arr->data_bytes);
+    arr->data.assign(data.begin(), data.end());
+    return arr;
+}
+
+core::Result<NpyArray> read_npy(const std::filesystem::path& path) {
+    auto bytes = read_bytes(path);
+    if (!bytes) return bytes.error();
+    return parse_npy(bytes->data, path);
+}
+
+core::Result<std::string> npy_bytes(const std::filesystem::path& path, const std::string& descr,
+                                    const std::vector<std::int64_t>& shape, const void* data,
+                                    std::size_t bytes) {
     const auto itemsize = item_size(descr);
     if (!itemsize) return make_error(where(path) + "unsupported dtype '" + descr + "'");
     const auto expected = data_bytes(shape, *itemsize);
@@ -298,17 +288,26 @@ core::Result<void> write_npy(const std::filesystem::path& path, const std::strin
     if (header.size() > 0xFFFF)
         return make_error(where(path) + "header too long for .npy format version 1.0");
 
+    std::string out;
+    out.reserve(kPreludeV1 + header.size() + bytes);
+    out.append(reinterpret_cast<const char*>(kMagic.data()), kMagic.size());
+    out.push_back(1);
+    out.push_back(0);
+    out.push_back(static_cast<char>(header.size() & 0xFF));
+    out.push_back(static_cast<char>(header.size() >> 8));
+    out += header;
+    if (bytes) out.append(static_cast<const char*>(data), bytes);
+    return out;
+}
+
+core::Result<void> write_npy(const std::filesystem::path& path, const std::string& descr,
+                             const std::vector<std::int64_t>& shape, const void* data,
+                             std::size_t bytes) {
+    auto file = npy_bytes(path, descr, shape, data, bytes);
+    if (!file) return file.error();
     std::ofstream out(path, std::ios::binary | std::ios::trunc);
     if (!out) return make_error(where(path) + "cannot open for writing");
-    std::array<unsigned char, kPreludeV1> prelude{};
-    std::copy(kMagic.begin(), kMagic.end(), prelude.begin());
-    prelude[6] = 1;
-    prelude[7] = 0;
-    prelude[8] = static_cast<unsigned char>(header.size() & 0xFF);
-    prelude[9] = static_cast<unsigned char>(header.size() >> 8);
-    out.write(reinterpret_cast<const char*>(prelude.data()), prelude.size());
-    out.write(header.data(), static_cast<std::streamsize>(header.size()));
-    if (bytes) out.write(static_cast<const char*>(data), static_cast<std::streamsize>(bytes));
+    out.write(file->data(), static_cast<std::streamsize>(file->size()));
     out.close();
     if (!out) return make_error(where(path) + "write failed");
     return {};

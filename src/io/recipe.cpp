@@ -173,8 +173,9 @@ core::ForgingSpec read_forging(const YamlReader& y, const YAML::Node& m, const R
 
 }  // namespace
 
-core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
-    const YamlReader y(file.string());
+core::Result<Recipe> parse_recipe(std::string_view text, const std::filesystem::path& file,
+                                  const PathExists& exists) {
+    const YamlReader y(file.string(), text, exists);
     return y.guarded<Recipe>([&] {
         const YAML::Node root = y.load();
         y.expect_map(
@@ -255,6 +256,12 @@ core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
             r.features.push_back(std::move(f));
         }
         return r;
+    });
+}
+
+core::Result<Recipe> read_recipe(const std::filesystem::path& file) {
+    return parse_file(file, [](std::string_view text, const std::filesystem::path& f) {
+        return parse_recipe(text, f);
     });
 }
 

@@ -48,17 +48,18 @@ std::string line_of(const YAML::Node& node) {
 
 // ---- YAML reading helpers. All return an error text without the file prefix. ----
 
-Result<YAML::Node> load_yaml(const fs::path& path) {
-    std::error_code ec;
-    if (!fs::is_regular_file(path, ec)) return make_error(where(path) + "missing");
+Result<YAML::Node> load_yaml(const FileSource& files, const fs::path& path) {
+    auto bytes = files(path);
+    if (!bytes) return bytes.error();
+    const std::string_view text = bytes->text();
     try {
-        YAML::Node doc = YAML::LoadFile(path.string());
+        YAML::Node doc = YAML::Load(std::string(text));
         if (!doc.IsMap())
             return make_error(where(path) + "top level is not a YAML mapping" + line_of(doc));
         return doc;
     } catch (const YAML::Exception& e) {
         if (e.mark.is_null()) return make_error(where(path) + "cannot read YAML: " + e.msg);
-        const YamlSyntaxError at = yaml_syntax_error(path.string(), e);
+        const YamlSyntaxError at = yaml_syntax_error(text, e);
         return make_error(where(path) + "YAML syntax error at line " + std::to_string(at.line) +
                           (at.column > 0 ? ", column " + std::to_string(at.column) : "") + ": " +
                           at.message);
@@ -249,13 +250,21 @@ std::string shape_str(const std::vector<std::int64_t>& shape) {
     return s + (shape.size() == 1 ? ",)" : ")");
 }
 
+// An array file's bytes and its header.
+struct Array {
+    Bytes file;
+    NpyArray header;
+};
+
 // Reads `name` under `dir` and checks dtype, C order and shape: `dims` dimensions, the trailing
 // ones equal to `tail` (-1: any).
-Result<NpyArray> read_array(const fs::path& dir, const char* name, const char* descr,
-                            std::size_t dims, std::vector<std::int64_t> tail,
-                            const char* expected_shape) {
+Result<Array> read_array(const FileSource& files, const fs::path& dir, const char* name,
+                         const char* descr, std::size_t dims, std::vector<std::int64_t> tail,
+                         const char* expected_shape) {
     const fs::path path = dir / name;
-    auto arr = read_npy_header(path);  // the data comes later, after every shape is checked
+    auto file = files(path);
+    if (!file) return file.error();
+    auto arr = parse_npy_header(file->data, path);  // the data is copied after every shape check
     if (!arr) return arr.error();
     if (arr->descr != descr)
         return make_error(where(path) + "dtype '" + arr->descr + "', expected '" + descr + "'");
@@ -268,23 +277,23 @@ Result<NpyArray> read_array(const fs::path& dir, const char* name, const char* d
     if (!ok)
         return make_error(where(path) + "shape " + shape_str(arr->shape) + ", expected " +
                           expected_shape);
-    return arr;
+    return Array{std::move(*file), std::move(*arr)};
 }
 
-// The data of `a` (a header from read_array) straight into `out`: no second copy in memory.
+// The data of `a` straight into `out`: the one copy from the file's bytes.
 template <class T>
-Result<void> read_into(const fs::path& dir, const char* name, const NpyArray& a,
-                       std::vector<T>& out) {
-    out.resize(a.data_bytes / sizeof(T));
-    return read_npy_data(dir / name, a, out.data());
+void copy_into(const Array& a, std::vector<T>& out) {
+    out.resize(a.header.data_bytes / sizeof(T));
+    if (!out.empty())
+        std::memcpy(out.data(), a.file.data.data() + a.header.data_offset, a.header.data_bytes);
 }
 
-Result<FaceScan> read_face(const fs::path& root, const std::string& name) {
+Result<FaceScan> read_face(const FileSource& files, const fs::path& root, const std::string& name) {
     FaceScan f;
     f.name = name;
     const fs::path dir = root / name;
     const fs::path fy = dir / "face.yaml";
-    auto doc = load_yaml(fy);
+    auto doc = load_yaml(files, fy);
     if (!doc) return doc.error();
     Eigen::MatrixXd T, s, R;
     if (auto e = number_matrix(*doc, "camera_to_world", 4, 4, T)) return make_error(where(fy) + *e);
@@ -314,39 +323,36 @@ Result<FaceScan> read_face(const fs::path& root, const std::string& name) {
         f.geometry_from_calibration = true;
     }
 
-    auto prof = read_array(dir, "profiles.npy", "<f4", 3, {-1, 2}, "(N, W, 2)");
+    auto prof = read_array(files, dir, "profiles.npy", "<f4", 3, {-1, 2}, "(N, W, 2)");
     if (!prof) return prof.error();
-    auto pt = read_array(dir, "profile_times.npy", "<i8", 1, {}, "(N,)");
+    auto pt = read_array(files, dir, "profile_times.npy", "<i8", 1, {}, "(N,)");
     if (!pt) return pt.error();
-    auto pp = read_array(dir, "profile_positions.npy", "<f8", 1, {}, "(N,)");
+    auto pp = read_array(files, dir, "profile_positions.npy", "<f8", 1, {}, "(N,)");
     if (!pp) return pp.error();
-    auto acc = read_array(dir, "accel.npy", "<f4", 2, {3}, "(K, 3)");
+    auto acc = read_array(files, dir, "accel.npy", "<f4", 2, {3}, "(K, 3)");
     if (!acc) return acc.error();
-    auto at = read_array(dir, "accel_times.npy", "<i8", 1, {}, "(K,)");
+    auto at = read_array(files, dir, "accel_times.npy", "<i8", 1, {}, "(K,)");
     if (!at) return at.error();
 
-    const std::int64_t N = prof->shape[0];
-    if (pt->shape[0] != N)
-        return make_error(where(dir / "profile_times.npy") + std::to_string(pt->shape[0]) +
+    const std::int64_t N = prof->header.shape[0];
+    if (pt->header.shape[0] != N)
+        return make_error(where(dir / "profile_times.npy") + std::to_string(pt->header.shape[0]) +
                           " entries, expected " + std::to_string(N) +
                           " (one per profile in profiles.npy)");
-    if (pp->shape[0] != N)
-        return make_error(where(dir / "profile_positions.npy") + std::to_string(pp->shape[0]) +
-                          " entries, expected " + std::to_string(N) +
-                          " (one per profile in profiles.npy)");
-    if (acc->shape[0] != at->shape[0])
-        return make_error(where(dir / "accel_times.npy") + std::to_string(at->shape[0]) +
-                          " entries, expected " + std::to_string(acc->shape[0]) +
+    if (pp->header.shape[0] != N)
+        return make_error(where(dir / "profile_positions.npy") +
+                          std::to_string(pp->header.shape[0]) + " entries, expected " +
+                          std::to_string(N) + " (one per profile in profiles.npy)");
+    if (acc->header.shape[0] != at->header.shape[0])
+        return make_error(where(dir / "accel_times.npy") + std::to_string(at->header.shape[0]) +
+                          " entries, expected " + std::to_string(acc->header.shape[0]) +
                           " (one per sample in accel.npy)");
-    f.width = prof->shape[1];
-    // One after the other: the first file that cannot be read ends it.
-    if (auto ok = read_into(dir, "profiles.npy", *prof, f.profiles_mm); !ok) return ok.error();
-    if (auto ok = read_into(dir, "profile_times.npy", *pt, f.profile_times_ns); !ok)
-        return ok.error();
-    if (auto ok = read_into(dir, "profile_positions.npy", *pp, f.profile_positions_mm); !ok)
-        return ok.error();
-    if (auto ok = read_into(dir, "accel.npy", *acc, f.accel_mps2); !ok) return ok.error();
-    if (auto ok = read_into(dir, "accel_times.npy", *at, f.accel_times_ns); !ok) return ok.error();
+    f.width = prof->header.shape[1];
+    copy_into(*prof, f.profiles_mm);
+    copy_into(*pt, f.profile_times_ns);
+    copy_into(*pp, f.profile_positions_mm);
+    copy_into(*acc, f.accel_mps2);
+    copy_into(*at, f.accel_times_ns);
     // A point is a pair of finite numbers; ±Inf is no more a point than NaN is.
     for (float& v : f.profiles_mm)
         if (!std::isfinite(v)) v = std::numeric_limits<float>::quiet_NaN();
@@ -354,9 +360,9 @@ Result<FaceScan> read_face(const fs::path& root, const std::string& name) {
     return f;
 }
 
-Result<Recording> read_recording_impl(const fs::path& dir) {
+Result<Recording> read_recording_impl(const fs::path& dir, const FileSource& files) {
     const fs::path py = dir / "part.yaml";
-    auto doc = load_yaml(py);
+    auto doc = load_yaml(files, py);
     if (!doc) return doc.error();
     const YAML::Node& d = *doc;
     Recording rec;
@@ -392,7 +398,7 @@ Result<Recording> read_recording_impl(const fs::path& dir) {
         if (auto e = check_face_name(name)) return make_error(where(py) + *e + line_of(n));
         if (!seen.insert(name).second)
             return make_error(where(py) + "face '" + name + "' is listed twice" + line_of(n));
-        auto face = read_face(dir, name);
+        auto face = read_face(files, dir, name);
         if (!face) return face.error();
         add_face_warnings(*face, dir / name, rec.warnings);
         rec.faces.push_back(std::move(*face));
@@ -420,11 +426,8 @@ Result<void> validate(const Recording& rec, const fs::path& dir) {
     return {};
 }
 
-Result<void> write_face(const FaceScan& f, const fs::path& dir) {
-    std::error_code ec;
-    fs::create_directories(dir, ec);
-    if (ec) return make_error(where(dir) + "cannot create directory: " + ec.message());
-
+// face.yaml and the arrays of `f`, as files under `dir`.
+Result<void> face_files(const FaceScan& f, const fs::path& dir, RecordingFiles& out) {
     const Eigen::Matrix4d T = f.T_world_camera.matrix();
     std::string y = "camera_to_world: [";
     for (int r = 0; r < 4; ++r) {
@@ -441,52 +444,46 @@ Result<void> write_face(const FaceScan& f, const fs::path& dir) {
     if (f.travel_scale != 1.0) y += "travel_scale: " + fmt_double(f.travel_scale) + "\n";
     if (f.clock_offset_ns != 0) y += "clock_offset_ns: " + std::to_string(f.clock_offset_ns) + "\n";
     if (f.geometry_from_calibration) y += "geometry_source: calibration\n";
-    if (auto ok = write_text(dir / "face.yaml", y); !ok) return ok;
+    out.emplace_back(dir / "face.yaml", std::move(y));
 
     const std::int64_t N = f.n_profiles(), K = f.n_accel();
-    auto bytes = [](const auto& v) { return v.size() * sizeof(v[0]); };
-    if (auto ok = write_npy(dir / "profiles.npy", "<f4", {N, f.width, 2}, f.profiles_mm.data(),
-                            bytes(f.profiles_mm));
-        !ok)
+    const auto array = [&](const char* name, const char* descr, std::vector<std::int64_t> shape,
+                           const auto& v) -> Result<void> {
+        auto bytes = npy_bytes(dir / name, descr, shape, v.data(), v.size() * sizeof(v[0]));
+        if (!bytes) return bytes.error();
+        out.emplace_back(dir / name, std::move(*bytes));
+        return {};
+    };
+    if (auto ok = array("profiles.npy", "<f4", {N, f.width, 2}, f.profiles_mm); !ok) return ok;
+    if (auto ok = array("profile_times.npy", "<i8", {N}, f.profile_times_ns); !ok) return ok;
+    if (auto ok = array("profile_positions.npy", "<f8", {N}, f.profile_positions_mm); !ok)
         return ok;
-    if (auto ok = write_npy(dir / "profile_times.npy", "<i8", {N}, f.profile_times_ns.data(),
-                            bytes(f.profile_times_ns));
-        !ok)
-        return ok;
-    if (auto ok = write_npy(dir / "profile_positions.npy", "<f8", {N},
-                            f.profile_positions_mm.data(), bytes(f.profile_positions_mm));
-        !ok)
-        return ok;
-    if (auto ok =
-            write_npy(dir / "accel.npy", "<f4", {K, 3}, f.accel_mps2.data(), bytes(f.accel_mps2));
-        !ok)
-        return ok;
-    return write_npy(dir / "accel_times.npy", "<i8", {K}, f.accel_times_ns.data(),
-                     bytes(f.accel_times_ns));
+    if (auto ok = array("accel.npy", "<f4", {K, 3}, f.accel_mps2); !ok) return ok;
+    return array("accel_times.npy", "<i8", {K}, f.accel_times_ns);
 }
 
 }  // namespace
 
-core::Result<core::Recording> read_recording(const std::filesystem::path& dir) {
+core::Result<core::Recording> read_recording(const std::filesystem::path& dir,
+                                             const FileSource& files) {
     try {
-        return read_recording_impl(dir);
-    } catch (const std::exception& e) {  // e.g. bad_alloc, filesystem_error: never escapes
+        return read_recording_impl(dir, files);
+    } catch (const std::exception& e) {  // e.g. bad_alloc: never escapes
         return make_error(where(dir) + "cannot read recording: " + e.what());
     }
 }
 
-core::Result<void> write_recording(const core::Recording& rec, const std::filesystem::path& dir) {
-    try {
-        if (auto ok = validate(rec, dir); !ok) return ok;
-        std::error_code ec;
-        fs::create_directories(dir, ec);
-        if (ec) return make_error(where(dir) + "cannot create directory: " + ec.message());
-        fs::remove(dir / "part.yaml", ec);  // see below
-        for (const FaceScan& f : rec.faces)
-            if (auto ok = write_face(f, dir / f.name); !ok) return ok;
+core::Result<core::Recording> read_recording(const std::filesystem::path& dir) {
+    return read_recording(dir, read_bytes);
+}
 
-        // part.yaml last: a recording interrupted while writing has no part.yaml and is not
-        // mistaken for a complete one.
+core::Result<RecordingFiles> recording_files(const core::Recording& rec,
+                                             const std::filesystem::path& dir) {
+    try {
+        if (auto ok = validate(rec, dir); !ok) return ok.error();
+        RecordingFiles files;
+        for (const FaceScan& f : rec.faces)
+            if (auto ok = face_files(f, dir / f.name, files); !ok) return ok.error();
         std::string y = "format: " + std::string(kRecordingFormat) + "\n";
         y += "part_id: " + quote(rec.part_id) + "\n";
         y += "recipe: " + quote(rec.recipe) + "\n";
@@ -496,10 +493,28 @@ core::Result<void> write_recording(const core::Recording& rec, const std::filesy
         for (std::size_t i = 0; i < rec.faces.size(); ++i)
             y += (i ? ", " : "") + quote(rec.faces[i].name);
         y += "]\n";
-        return write_text(dir / "part.yaml", y);
+        files.emplace_back(dir / "part.yaml", std::move(y));
+        return files;
     } catch (const std::exception& e) {
         return make_error(where(dir) + "cannot write recording: " + e.what());
     }
+}
+
+core::Result<void> write_recording(const core::Recording& rec, const std::filesystem::path& dir) {
+    auto files = recording_files(rec, dir);
+    if (!files) return files.error();
+    std::error_code ec;
+    fs::remove(dir / "part.yaml", ec);  // see below
+    // part.yaml last: a recording interrupted while writing has no part.yaml and is not mistaken
+    // for a complete one.
+    for (const auto& [path, bytes] : *files) {
+        fs::create_directories(path.parent_path(), ec);
+        if (ec)
+            return make_error(where(path.parent_path()) +
+                              "cannot create directory: " + ec.message());
+        if (auto ok = write_text(path, bytes); !ok) return ok;
+    }
+    return {};
 }
 
 }  // namespace hotgauge::io

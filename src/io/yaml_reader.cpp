@@ -18,7 +18,7 @@ namespace {
 // never closes, comments and quoted scalars skipped; -1 when there is none (the collection is
 // closed and the mistake is inside it, where yaml-cpp says). yaml-cpp reports an unclosed flow
 // collection where it gave up looking for its end, a line or more after the mistake.
-int unclosed_flow_line(const std::string& text, int error_line) {
+int unclosed_flow_line(std::string_view text, int error_line) {
     std::vector<int> open;  // the lines of the brackets still open
     int line = 0;
     char quote = 0;
@@ -65,13 +65,10 @@ int unclosed_flow_line(const std::string& text, int error_line) {
 
 }  // namespace
 
-YamlSyntaxError yaml_syntax_error(const std::string& file, const YAML::Exception& e) {
+YamlSyntaxError yaml_syntax_error(std::string_view text, const YAML::Exception& e) {
     if (e.mark.is_null()) return {0, 0, e.msg};
     YamlSyntaxError out{e.mark.line + 1, e.mark.column + 1, e.msg};
     if (e.msg.find("flow not found") != std::string::npos) {  // an unclosed [ or {
-        std::ifstream in(file);
-        const std::string text((std::istreambuf_iterator<char>(in)),
-                               std::istreambuf_iterator<char>());
         if (const int at = unclosed_flow_line(text, e.mark.line); at >= 0) {
             out.message += " (the bracket opened on this line is not closed)";
             out.line = at + 1;
@@ -82,13 +79,16 @@ YamlSyntaxError yaml_syntax_error(const std::string& file, const YAML::Exception
 }
 
 YAML::Node YamlReader::load() const {
-    std::error_code ec;  // a name too long, a symlink loop: an error here, never an exception
-    if (!std::filesystem::exists(file_, ec))
-        throw YamlError(file_ + ": " + (ec ? ec.message() : std::string("file not found")));
+    if (!given_) {
+        auto bytes = read_bytes(file_);
+        if (!bytes) throw YamlError(bytes.error().message);
+        read_ = std::string(bytes->text());
+        text_ = read_;
+    }
     try {
-        return YAML::LoadFile(file_);
+        return YAML::Load(std::string(text_));
     } catch (const YAML::Exception& e) {
-        const YamlSyntaxError where = yaml_syntax_error(file_, e);
+        const YamlSyntaxError where = yaml_syntax_error(text_, e);
         throw YamlError(file_ + ":" + std::to_string(where.line) +
                         ": YAML syntax error: " + where.message);
     }
@@ -97,7 +97,7 @@ YAML::Node YamlReader::load() const {
 std::filesystem::path YamlReader::existing(const YAML::Node& node, const std::string& what,
                                            const std::filesystem::path& path) const {
     std::error_code ec;
-    const bool there = std::filesystem::exists(path, ec);
+    const bool there = exists_(path, ec);
     if (ec) fail(node, what + ": " + path.string() + ": " + ec.message());
     if (!there) fail(node, what + ": " + path.string() + " does not exist");
     return path;

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <string_view>
 
+#include "hotgauge/io/bytes.hpp"
 #include "hotgauge/results/archive.hpp"
 
 namespace hotgauge::results {
@@ -90,19 +91,20 @@ bool day_may_hold(const std::filesystem::path& file, const TimeRange& range) {
     return true;
 }
 
-core::Result<void> read_file(const std::filesystem::path& path, const TimeRange& range,
-                             bool skip_bad_lines, PartsRead& out,
-                             std::map<std::uint64_t, std::size_t>& at) {
-    std::ifstream in(path);
-    if (!in) return core::make_error(path.string() + ": cannot open");
+// The lines of one day file's text into `out`, a sequence seen before replacing its part.
+core::Result<void> read_lines(std::string_view text, const std::filesystem::path& path,
+                              const TimeRange& range, bool skip_bad_lines, PartsRead& out,
+                              std::map<std::uint64_t, std::size_t>& at) {
     ++out.files;
-    std::string text;
-    for (std::size_t n = 1; std::getline(in, text); ++n) {
-        if (text.empty()) continue;
+    for (std::size_t n = 1; !text.empty(); ++n) {
+        const std::size_t end = std::min(text.find('\n'), text.size());
+        const std::string_view line = text.substr(0, end);
+        text.remove_prefix(std::min(end + 1, text.size()));
+        if (line.empty()) continue;
         ++out.lines;
         PartRecord p;
         try {
-            p = parse_result_line(text);
+            p = part_of(json::parse(line, keep));
         } catch (const json::exception& e) {
             std::string why =
                 path.string() + ":" + std::to_string(n) + ": not a result line: " + e.what();
@@ -139,8 +141,19 @@ core::Result<PartsRead> read_parts(const std::filesystem::path& dir, const TimeR
     std::map<std::uint64_t, std::size_t> at;  // sequence → index in out.parts
     for (const auto& path : *files) {
         if (!day_may_hold(path, range)) continue;
-        if (auto ok = read_file(path, range, skip_bad_lines, out, at); !ok) return ok.error();
+        auto bytes = io::read_bytes(path);
+        if (!bytes) return bytes.error();
+        if (auto ok = read_lines(bytes->text(), path, range, skip_bad_lines, out, at); !ok)
+            return ok.error();
     }
+    return out;
+}
+
+core::Result<PartsRead> parse_parts(std::string_view text, const std::filesystem::path& file,
+                                    const TimeRange& range, bool skip_bad_lines) {
+    PartsRead out;
+    std::map<std::uint64_t, std::size_t> at;
+    if (auto ok = read_lines(text, file, range, skip_bad_lines, out, at); !ok) return ok.error();
     return out;
 }
 

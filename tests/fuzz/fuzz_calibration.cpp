@@ -1,6 +1,7 @@
-// Fuzzes calib::read_calibration (config/calibration.yaml, docs/calibration.md). Input: the whole
-// file. Asserts: no crash, sanitizer report or exception (read_calibration promises a
-// core::Result); an error names the file; an accepted calibration has faces with unique names.
+// Fuzzes calib::parse_calibration (config/calibration.yaml, docs/calibration.md). Input: the
+// whole file, named fuzz/calibration.yaml. Asserts: no crash, sanitizer report or exception
+// (parse_calibration promises a core::Result); an error names the file; an accepted calibration
+// has faces with unique names.
 #include <set>
 
 #include "fuzz_util.hpp"
@@ -9,8 +10,10 @@
 using namespace hotgauge;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-    const auto file = fuzz::input_file("calibration", "calibration.yaml", data, size);
-    auto c = fuzz::no_throw("read_calibration", [&] { return calib::read_calibration(file); });
+    static const auto file = fuzz::kDir / "calibration.yaml";
+    auto c = fuzz::no_throw("parse_calibration", [&] {
+        return calib::parse_calibration(fuzz::text_of(data, size), file);
+    });
     if (!c) {
         fuzz::check_error_names(c.error(), file);
         return 0;

@@ -1,15 +1,16 @@
-// Fuzzes io::read_certificate (a master part's certificate, docs/verification.md). Input: the
-// whole file. Asserts: no crash, sanitizer report or exception (read_certificate promises a
-// core::Result); an error names the file; an accepted certificate has features, uncertainties not
-// negative and tolerances positive.
+// Fuzzes io::parse_certificate (a master part's certificate, docs/verification.md). Input: the
+// whole file, named fuzz/master.yaml. Asserts: no crash, sanitizer report or exception
+// (parse_certificate promises a core::Result); an error names the file; an accepted certificate
+// has features, uncertainties not negative and tolerances positive.
 #include "fuzz_util.hpp"
 #include "hotgauge/io/certificate.hpp"
 
 using namespace hotgauge;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-    const auto file = fuzz::input_file("certificate", "master.yaml", data, size);
-    auto c = fuzz::no_throw("read_certificate", [&] { return io::read_certificate(file); });
+    static const auto file = fuzz::kDir / "master.yaml";
+    auto c = fuzz::no_throw("parse_certificate",
+                            [&] { return io::parse_certificate(fuzz::text_of(data, size), file); });
     if (!c) {
         fuzz::check_error_names(c.error(), file);
         return 0;

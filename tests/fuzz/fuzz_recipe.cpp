@@ -1,7 +1,8 @@
-// Fuzzes io::read_recipe (config/parts/*.yaml, docs/recipes.md). Input: the whole recipe file.
-// An empty hub-a.ply sits beside it, so that a mesh_file naming it passes the existence check.
-// Asserts: no crash, sanitizer report or exception (read_recipe promises a core::Result); an
-// error names the file; an accepted recipe has unique feature names and slots.
+// Fuzzes io::parse_recipe (config/parts/*.yaml, docs/recipes.md). Input: the whole recipe file,
+// named fuzz/recipe.yaml; a file system in which fuzz/hub-a.ply exists, so that a mesh_file
+// naming it passes the existence check. Asserts: no crash, sanitizer report or exception
+// (parse_recipe promises a core::Result); an error names the file; an accepted recipe has unique
+// feature names and slots.
 #include <set>
 
 #include "fuzz_util.hpp"
@@ -10,10 +11,10 @@
 using namespace hotgauge;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-    static const auto mesh = fuzz::input_file("recipe", "hub-a.ply", nullptr, 0);
-    (void)mesh;
-    const auto file = fuzz::input_file("recipe", "recipe.yaml", data, size);
-    auto r = fuzz::no_throw("read_recipe", [&] { return io::read_recipe(file); });
+    static const io::PathExists exists = fuzz::files_exist({"hub-a.ply"});
+    static const auto file = fuzz::kDir / "recipe.yaml";
+    auto r = fuzz::no_throw(
+        "parse_recipe", [&] { return io::parse_recipe(fuzz::text_of(data, size), file, exists); });
     if (!r) {
         fuzz::check_error_names(r.error(), file);
         return 0;

@@ -1,4 +1,5 @@
-// Fuzzes io::read_recording (recording format v1, a folder of YAML and .npy files).
+// Fuzzes io::read_recording (recording format v1, a folder of YAML and .npy files) on files in
+// memory: the folder is named fuzz/in, its files are the input's pieces.
 //
 // Input: a small container, so that one input is a whole recording and mutations reach the deep
 // checks: pieces separated by the line "%%hotgauge%%" (kSep below). Piece 0 is part.yaml; pieces
@@ -8,8 +9,8 @@
 // The seeds (make_seeds.py) list faces [a] or [a, b].
 //
 // Asserts: no crash, sanitizer report or exception; an error names a file under the folder; a
-// recording it accepts is accepted by write_recording (the writer refuses only what the reader
-// rejects) and reads back identical.
+// recording it accepts is accepted by recording_files (write_recording's files: the writer
+// refuses only what the reader rejects) and reads back identical from them.
 #include <cstring>
 #include <string_view>
 #include <vector>
@@ -56,40 +57,39 @@ bool same_face(const core::FaceScan& a, const core::FaceScan& b) {
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-    const fs::path& scratch = fuzz::scratch_dir("recording");
-    const fs::path dir = scratch / "in";
-    static const bool made = [&] {
-        for (const char* face : {"a", "b"}) fs::create_directories(dir / face);
-        return true;
+    static const fs::path dir = fuzz::kDir / "in";
+    static const std::vector<fs::path> slots = [] {
+        std::vector<fs::path> s = {dir / "part.yaml"};
+        for (const char* face : {"a", "b"})
+            for (const char* file : kFaceFiles) s.push_back(dir / face / file);
+        return s;
     }();
-    (void)made;
-
-    const auto pieces = split({reinterpret_cast<const char*>(data), size});
-    std::vector<fs::path> slots = {dir / "part.yaml"};
-    for (const char* face : {"a", "b"})
-        for (const char* file : kFaceFiles) slots.push_back(dir / face / file);
-    for (std::size_t i = 0; i < slots.size(); ++i) {
-        if (i < pieces.size())
-            fuzz::write_file(slots[i], reinterpret_cast<const std::uint8_t*>(pieces[i].data()),
-                             pieces[i].size());
-        else
-            ::unlink(slots[i].c_str());
-    }
-
-    auto rec = fuzz::no_throw("read_recording", [&] { return io::read_recording(dir); });
+    const auto pieces = split(fuzz::text_of(data, size));
+    const io::FileSource files = [&](const fs::path& path) -> core::Result<io::Bytes> {
+        for (std::size_t i = 0; i < slots.size() && i < pieces.size(); ++i)
+            if (path == slots[i]) return io::Bytes::view(pieces[i]);
+        return core::make_error(path.string() + ": missing");
+    };
+    auto rec = fuzz::no_throw("read_recording", [&] { return io::read_recording(dir, files); });
     if (!rec) {
         fuzz::check_error_names(rec.error(), dir);
         return 0;
     }
     fuzz::check(!rec->faces.empty(), "a recording without faces was accepted");
 
-    const fs::path copy = scratch / "copy";
+    const fs::path copy = fuzz::kDir / "copy";
     auto written =
-        fuzz::no_throw("write_recording", [&] { return io::write_recording(*rec, copy); });
-    fuzz::check(written.ok(), "write_recording refused a recording read_recording accepted: " +
+        fuzz::no_throw("recording_files", [&] { return io::recording_files(*rec, copy); });
+    fuzz::check(written.ok(), "recording_files refused a recording read_recording accepted: " +
                                   (written ? std::string() : written.error().message));
-    auto again = fuzz::no_throw("read_recording", [&] { return io::read_recording(copy); });
-    fuzz::check(again.ok(), "read_recording refused what write_recording wrote: " +
+    const io::FileSource written_files = [&](const fs::path& path) -> core::Result<io::Bytes> {
+        for (const auto& [p, bytes] : *written)
+            if (p == path) return io::Bytes::view(bytes);
+        return core::make_error(path.string() + ": missing");
+    };
+    auto again =
+        fuzz::no_throw("read_recording", [&] { return io::read_recording(copy, written_files); });
+    fuzz::check(again.ok(), "read_recording refused what recording_files wrote: " +
                                 (again ? std::string() : again.error().message));
     bool same =
         again->part_id == rec->part_id && again->recipe == rec->recipe &&
@@ -97,6 +97,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         again->faces.size() == rec->faces.size() && again->warnings.size() == rec->warnings.size();
     for (std::size_t i = 0; same && i < rec->faces.size(); ++i)
         same = same_face(rec->faces[i], again->faces[i]);
-    fuzz::check(same, "the recording changed in a write_recording + read_recording round trip");
+    fuzz::check(same, "the recording changed in a recording_files + read_recording round trip");
     return 0;
 }

@@ -1,9 +1,8 @@
 #pragma once
-// Shared by the libFuzzer harnesses (tests/fuzz/README.md): a scratch folder per process for the
-// file-based readers, and the checks every harness makes. A failed check prints what was wrong and
-// aborts, which libFuzzer reports as a crash and saves as crash-<sha1>.
+// Shared by the libFuzzer harnesses (tests/fuzz/README.md): the names and the file system the
+// in-memory readers are given, and the checks every harness makes. A failed check prints what was
+// wrong and aborts, which libFuzzer reports as a crash and saves as crash-<sha1>.
 #include <cxxabi.h>
-#include <unistd.h>
 
 #include <cstddef>
 #include <cstdint>
@@ -13,48 +12,37 @@
 #include <filesystem>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <typeinfo>
+#include <vector>
 
 #include "hotgauge/core/result.hpp"
+#include "hotgauge/io/bytes.hpp"
 
 namespace hotgauge::fuzz {
 
-// A fresh folder for this process under $FUZZ_SCRATCH (run.sh sets it and removes it after the
-// run: libFuzzer ends with _Exit, so atexit cleanup would not run), else under /dev/shm when
-// there is one (no disk I/O), else the temporary folder. Parallel runs (-jobs, -fork) get one each.
-inline const std::filesystem::path& scratch_dir(const char* harness) {
-    static const std::filesystem::path dir = [harness] {
-        namespace fs = std::filesystem;
-        std::error_code ec;
-        const char* env = std::getenv("FUZZ_SCRATCH");
-        const fs::path base = env && *env                        ? fs::path(env)
-                              : fs::is_directory("/dev/shm", ec) ? fs::path("/dev/shm")
-                                                                 : fs::temp_directory_path();
-        fs::path d = base / ("hotgauge-" + std::string(harness) + "-" + std::to_string(::getpid()));
-        fs::remove_all(d, ec);
-        fs::create_directories(d);
-        return d;
-    }();
-    return dir;
+// The folder the harnesses' inputs are named in: no file is written or read, the readers take
+// the input's bytes and these names for their messages.
+inline const std::filesystem::path kDir = "fuzz";
+
+// A file system that has exactly `files` under kDir; a name longer than a file system's 255
+// bytes cannot be looked at (the error a real one gives), everything else does not exist.
+inline io::PathExists files_exist(std::vector<std::string> files) {
+    return [files = std::move(files)](const std::filesystem::path& p, std::error_code& ec) {
+        if (p.filename().string().size() > 255) {
+            ec = std::make_error_code(std::errc::filename_too_long);
+            return false;
+        }
+        ec.clear();
+        for (const auto& f : files)
+            if (p == kDir / f) return true;
+        return false;
+    };
 }
 
-// Writes `size` bytes to `path` (replacing it); aborts when it cannot, since that is the
-// harness's environment failing, not the reader.
-inline void write_file(const std::filesystem::path& path, const std::uint8_t* data,
-                       std::size_t size) {
-    std::FILE* f = std::fopen(path.c_str(), "wb");
-    if (!f || (size && std::fwrite(data, 1, size, f) != size) || std::fclose(f) != 0) {
-        std::fprintf(stderr, "harness: cannot write %s\n", path.c_str());
-        std::abort();
-    }
-}
-
-// The whole input as the file `name` in this process's scratch folder.
-inline std::filesystem::path input_file(const char* harness, const char* name,
-                                        const std::uint8_t* data, std::size_t size) {
-    std::filesystem::path path = scratch_dir(harness) / name;
-    write_file(path, data, size);
-    return path;
+// The input as text.
+inline std::string_view text_of(const std::uint8_t* data, std::size_t size) {
+    return {reinterpret_cast<const char*>(data), size};
 }
 
 [[noreturn]] inline void fail(const std::string& what) {

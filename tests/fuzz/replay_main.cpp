@@ -1,9 +1,10 @@
 // main() for the libFuzzer harnesses in builds without libFuzzer: make test's GCC builds, where
 // every harness runs as the ctest fuzz_replay_<harness> (label unit, so under ASan/UBSan too).
-// Each corpus file is fed as it is, then `--mutants` deterministic variants of it (a byte
-// flipped, set to an edge value, a run cut out, repeated or inserted, the tail cut off). Every
-// regression input in the corpus therefore runs in every make test, and every harness sees
-// damaged input there; coverage-guided search is `make fuzz` (clang, libFuzzer).
+// Each corpus file is fed as it is, then deterministic variants of it (a byte flipped, set to an
+// edge value, a run cut out, repeated or inserted, the tail cut off): `--mutants` in all, shared
+// evenly by the files, so that a corpus that grows with every `make fuzz` does not make the
+// replay longer. Every regression input in the corpus therefore runs in every make test, and
+// every harness sees damaged input there; coverage-guided search is `make fuzz` (clang, libFuzzer).
 //   fuzz_<harness>_replay [--mutants N] [--seed S] FILE|FOLDER ...
 // A failed harness check or a sanitizer report aborts; the input is then written to
 // ./fuzz-replay-crash (reproduce with `make fuzz`'s harness binary and that file).
@@ -130,10 +131,6 @@ int main(int argc, char** argv) {
     }
     std::signal(SIGABRT, on_abort);
     if (__sanitizer_set_death_callback) __sanitizer_set_death_callback(save_input);
-    // The harnesses' scratch files (fuzz_util.hpp) in a folder of our own, removed at the end.
-    char scratch[] = "/tmp/hotgauge-fuzz-replay.XXXXXX";
-    if (!::mkdtemp(scratch)) return 2;
-    ::setenv("FUZZ_SCRATCH", scratch, 1);
     long runs = 0;
     for (std::size_t k = 0; k < files.size(); ++k) {
         std::ifstream f(files[k], std::ios::binary);
@@ -141,14 +138,15 @@ int main(int argc, char** argv) {
         run(seed_input, files[k].string());
         std::mt19937_64 rng(seed * 0x9e3779b97f4a7c15ull + k);
         Bytes m = seed_input;
-        for (int j = 0; j < mutants; ++j) {
+        // The file's share of the mutants: as many each, the remainder to the first files.
+        const long share = mutants / static_cast<long>(files.size()) +
+                           (static_cast<long>(k) < mutants % static_cast<long>(files.size()));
+        for (long j = 0; j < share; ++j) {
             m = j % 4 == 0 ? mutate(seed_input, rng) : mutate(m, rng);  // stacked, then afresh
             run(m, files[k].string() + ", mutant " + std::to_string(j + 1));
         }
-        runs += 1 + mutants;
+        runs += 1 + share;
     }
-    std::error_code ec;
-    fs::remove_all(scratch, ec);
     std::printf("%ld inputs from %zu corpus files, no finding\n", runs, files.size());
     return 0;
 }

@@ -1,14 +1,21 @@
 #!/bin/bash
-# Runs the libFuzzer harnesses of a HOTGAUGE_FUZZ build (tests/fuzz/README.md), one after the
-# other, each for SECONDS on a scratch copy of its seed corpus (the in-tree corpus never grows),
-# and prints executions and exec/s per harness. Exit status 1 when any harness had a finding
-# (crash, sanitizer report, failed check, timeout, out of memory); its reproducer is in
-# FINDINGS/<harness>/ and its log in LOGS/<harness>.log.
+# Runs the libFuzzer harnesses of a HOTGAUGE_FUZZ build (tests/fuzz/README.md), each for SECONDS
+# on a working copy of its corpus, so that the runs add up:
+#   - what a run found that adds coverage to tests/fuzz/corpus/<harness> is added to it
+#     (libFuzzer's -merge=1; nothing is removed, so regression inputs stay; FUZZ_CORPUS_MAX_KB
+#     caps a corpus, smallest new inputs first);
+#   - a line per harness is appended to tests/fuzz/ledger.tsv: date, harness, the commit the run
+#     was built from (+dirty when the tree had changes), executions, seconds, findings.
+# Commit both after a run. FUZZ_NO_LEDGER=1 leaves the corpus and the ledger alone.
+# Exit status 1 when any harness had a finding (crash, failed check, timeout, out of memory); its
+# reproducer is in FINDINGS/<harness>/, its log in LOGS/<harness>.log. Replay it in the sanitizer
+# build (make build-fuzz): build-fuzz/tests/fuzz/<harness> FILE.
 #   tests/fuzz/run.sh BUILD_DIR SECONDS [HARNESS ...]     (default: every harness of the corpus)
-# Environment: FUZZ_FINDINGS (default BUILD_DIR/fuzz-findings), FUZZ_LOGS (BUILD_DIR/fuzz-logs),
-# FUZZ_ARGS (more libFuzzer flags, e.g. -jobs=2 -workers=2).
+# Environment: FUZZ_PARALLEL (harnesses run at once, default 1), FUZZ_FINDINGS (default
+# BUILD_DIR/fuzz-findings), FUZZ_LOGS (BUILD_DIR/fuzz-logs), FUZZ_ARGS (more libFuzzer flags).
 set -u
 here=$(cd "$(dirname "$0")" && pwd)
+repo=$(cd "$here/../.." && pwd)
 build=$(cd "$1" && pwd)
 seconds=$2
 shift 2
@@ -18,47 +25,93 @@ if [ ${#harnesses[@]} -eq 0 ]; then
 fi
 findings=${FUZZ_FINDINGS:-$build/fuzz-findings}
 logs=${FUZZ_LOGS:-$build/fuzz-logs}
+cap_kb=${FUZZ_CORPUS_MAX_KB:-1024}
+ledger=$here/ledger.tsv
 mkdir -p "$logs"
-scratch=$(mktemp -d "${TMPDIR:-/tmp}/hotgauge-fuzz-corpus.XXXXXX")
-# The harnesses' files (fuzz_util.hpp scratch_dir), in memory when there is /dev/shm.
-files=$(mktemp -d "$([ -d /dev/shm ] && echo /dev/shm || echo "${TMPDIR:-/tmp}")/hotgauge-fuzz.XXXXXX")
-export FUZZ_SCRATCH=$files
-trap 'rm -rf "$scratch" "$files"' EXIT
+work=$(mktemp -d "${TMPDIR:-/tmp}/hotgauge-fuzz.XXXXXX")
+trap 'rm -rf "$work"' EXIT
+commit=$(git -C "$repo" rev-parse --short=12 HEAD 2>/dev/null || echo unknown)
+if [ -n "$(git -C "$repo" status --porcelain -- src include tests/fuzz/*.cpp tests/fuzz/*.hpp 2>/dev/null)" ]; then
+    commit=$commit+dirty
+fi
 
-status=0
-printf '%-20s %8s %12s %10s  %s\n' harness seconds executions exec/s result
-for h in "${harnesses[@]}"; do
-    bin=$build/tests/fuzz/$h
+# One harness: run, then merge its new inputs back. Prints its line of the table to $work/<h>.out.
+fuzz_one() {
+    local h=$1 bin=$build/tests/fuzz/$1 out=$work/$1.out
     if [ ! -x "$bin" ]; then
-        echo "$h: $bin not built" >&2
-        status=1
-        continue
+        echo "$h: $bin not built" >"$out"
+        return 1
     fi
-    mkdir -p "$scratch/$h" "$findings/$h"
-    cp "$here/corpus/$h/"* "$scratch/$h/"
-    dict=()
-    [ -f "$here/$h.dict" ] && dict=(-dict="$here/$h.dict")
-    # <harness>.args: that harness's own libFuzzer flags (e.g. fuzz_modbus's -max_len).
-    own=()
-    [ -f "$here/$h.args" ] && read -r -a own < "$here/$h.args"
+    mkdir -p "$work/$h/run" "$work/$h/merged" "$findings/$h"
+    cp "$here/corpus/$h/"* "$work/$h/run/"
+    local flags=()
+    [ -f "$here/$h.dict" ] && flags+=(-dict="$here/$h.dict")
+    # <harness>.args: that harness's own libFuzzer flags (its -max_len).
+    local own=()
+    [ -f "$here/$h.args" ] && read -r -a own <"$here/$h.args"
     # -timeout: an input that takes 10 s is a hang; -rss_limit_mb/-malloc_limit_mb: a reader must
     # not need more than this for a file of a few kilobytes.
     "$bin" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=512 \
-        -print_final_stats=1 -artifact_prefix="$findings/$h/" "${dict[@]}" "${own[@]}" ${FUZZ_ARGS:-} \
-        "$scratch/$h" >"$logs/$h.log" 2>&1
-    rc=$?
+        -print_final_stats=1 -artifact_prefix="$findings/$h/" "${flags[@]}" "${own[@]}" \
+        ${FUZZ_ARGS:-} "$work/$h/run" >"$logs/$h.log" 2>&1
+    local rc=$?
+    local runs rate result
     runs=$(grep -h 'stat::number_of_executed_units' "$logs/$h.log" | awk '{s += $2} END {print s + 0}')
     rate=$(grep -h 'stat::average_exec_per_sec' "$logs/$h.log" | awk '{s += $2} END {print s + 0}')
+    local found=0
     if [ $rc -eq 0 ]; then
         result=ok
     else
-        status=1
+        found=1
+        local artifact
         artifact=$(grep -ho "Test unit written to .*" "$logs/$h.log" | tail -1 | sed 's/Test unit written to //')
         result="FINDING (exit $rc): ${artifact:-see $logs/$h.log}"
     fi
-    printf '%-20s %8s %12s %10s  %s\n' "$h" "$seconds" "$runs" "$rate" "$result"
+    if [ -z "${FUZZ_NO_LEDGER:-}" ]; then
+        merge_back "$h" "$bin" "${own[@]}" >>"$logs/$h.log" 2>&1
+        printf '%s\t%s\t%s\t%s\t%s\t%s\n' "$(date -u +%Y-%m-%dT%H:%M:%SZ)" "$h" "$commit" "$runs" \
+            "$seconds" "$found" >"$work/$h.ledger"
+    fi
+    printf '%-20s %8s %12s %10s %8s  %s\n' "$h" "$seconds" "$runs" "$rate" \
+        "$(ls "$here/corpus/$h" | wc -l)" "$result" >"$out"
     if [ $rc -ne 0 ]; then
-        grep -hE 'ERROR: |FUZZ CHECK FAILED|SUMMARY: |threw |^    #[0-9] ' "$logs/$h.log" | head -12 | sed 's/^/    /'
+        grep -hE 'ERROR: |FUZZ CHECK FAILED|SUMMARY: |threw |^    #[0-9] ' "$logs/$h.log" | head -12 |
+            sed 's/^/    /' >>"$out"
+    fi
+    return $found
+}
+
+# The run's inputs that add coverage to the in-tree corpus (libFuzzer's -merge=1 into a copy of
+# it), added to it smallest first up to the cap. Nothing in the corpus is removed.
+merge_back() {
+    local h=$1 bin=$2
+    shift 2
+    local corpus=$here/corpus/$h merged=$work/$h/merged
+    cp "$corpus"/* "$merged/"
+    "$bin" -merge=1 "$@" "$merged" "$work/$h/run" || return 0
+    local budget=$((cap_kb * 1024 - $(cat "$corpus"/* | wc -c)))
+    local f size
+    for f in $(ls -S -r "$merged"); do
+        [ -e "$corpus/$f" ] && continue
+        size=$(stat -c %s "$merged/$f")
+        [ "$size" -gt "$budget" ] && break
+        cp "$merged/$f" "$corpus/$f"
+        budget=$((budget - size))
+    done
+}
+
+export -f fuzz_one merge_back
+export here build seconds findings logs cap_kb work commit
+
+printf '%-20s %8s %12s %10s %8s  %s\n' harness seconds executions exec/s corpus result
+printf '%s\n' "${harnesses[@]}" | xargs -P "${FUZZ_PARALLEL:-1}" -I{} bash -c 'fuzz_one {}'
+status=$?
+for h in "${harnesses[@]}"; do
+    cat "$work/$h.out" 2>/dev/null
+    if [ -f "$work/$h.ledger" ]; then
+        [ -f "$ledger" ] || printf 'date\tharness\tcommit\texecutions\tseconds\tfindings\n' >"$ledger"
+        cat "$work/$h.ledger" >>"$ledger"
     fi
 done
-exit $status
+[ $status -eq 0 ] || exit 1
+exit 0

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "hotgauge/core/result.hpp"
+#include "hotgauge/io/bytes.hpp"
 
 namespace hotgauge::calib {
 
@@ -39,5 +40,7 @@ double surface_distance(const Artifact& artifact, std::size_t j, const Eigen::Ve
 // Reads ARTIFACT.yaml: at least 3 spheres, names unique, diameters positive, no two spheres
 // overlapping, normals non-zero (normalised on reading). Errors name file:line and the key.
 core::Result<Artifact> read_artifact(const std::filesystem::path& file);
+// The same on the file's text, `file` naming it in errors.
+core::Result<Artifact> parse_artifact(std::string_view text, const std::filesystem::path& file);
 
 }  // namespace hotgauge::calib

@@ -16,6 +16,7 @@
 #include "hotgauge/calib/sensor.hpp"
 #include "hotgauge/core/recording.hpp"
 #include "hotgauge/core/result.hpp"
+#include "hotgauge/io/bytes.hpp"
 
 namespace hotgauge::calib {
 
@@ -69,6 +70,9 @@ struct Calibration {
 // Reads calibration.yaml; errors name file:line and key. Every face's rotations must be proper
 // (orthonormal, det +1), scan directions unit, names unique, the sensor's ranges ordered.
 core::Result<Calibration> read_calibration(const std::filesystem::path& file);
+// The same on the file's text, `file` naming it in errors.
+core::Result<Calibration> parse_calibration(std::string_view text,
+                                            const std::filesystem::path& file);
 
 // Writes calibration.yaml (full double precision, so reading it back gives the same numbers).
 core::Result<void> write_calibration(const Calibration& c, const std::filesystem::path& file);

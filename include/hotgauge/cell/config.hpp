@@ -18,6 +18,7 @@
 #include "hotgauge/compensate/compensate.hpp"
 #include "hotgauge/core/part.hpp"
 #include "hotgauge/core/result.hpp"
+#include "hotgauge/io/bytes.hpp"
 #include "hotgauge/plant/mqtt.hpp"
 #include "hotgauge/plc/pyrometer.hpp"
 #include "hotgauge/plc/server.hpp"
@@ -113,5 +114,10 @@ core::Result<void> check_recipe_for_cell(const core::Recipe& recipe,
 // Reads and validates; errors name file:line and the key. Referenced files (recipes, models,
 // the calibration) must exist; their content is checked by their own readers at start.
 core::Result<DaemonConfig> read_daemon_config(const std::filesystem::path& file);
+// The same on the file's text: `file` names it in errors and is the folder referenced files are
+// found in; `exists` is asked whether they exist.
+core::Result<DaemonConfig> parse_daemon_config(std::string_view text,
+                                               const std::filesystem::path& file,
+                                               const io::PathExists& exists = io::exists_on_disk);
 
 }  // namespace hotgauge::cell

@@ -2,6 +2,7 @@
 // NumPy .npy files, format version 1.0 (the version recording format v1 prescribes).
 #include <cstdint>
 #include <filesystem>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -21,17 +22,22 @@ struct NpyArray {
 // Reads a .npy file; an Error names the file and what is wrong (missing, not .npy, unsupported
 // version, malformed header, truncated data).
 core::Result<NpyArray> read_npy(const std::filesystem::path& path);
-
-// The header only (`data` stays empty), checked against the file's size: a reader checks
-// shapes before it allocates anything, then reads the data straight into its own buffer.
-core::Result<NpyArray> read_npy_header(const std::filesystem::path& path);
-// The data of `header` (from read_npy_header of the same file) into `out`, header.data_bytes long.
-core::Result<void> read_npy_data(const std::filesystem::path& path, const NpyArray& header,
-                                 void* out);
+// The same on the file's bytes, `path` naming it in errors.
+core::Result<NpyArray> parse_npy(std::span<const unsigned char> file,
+                                 const std::filesystem::path& path);
+// The header only (`data` stays empty), checked against the file's size: a reader checks shapes
+// before it allocates anything, then copies the data (file.subspan(data_offset, data_bytes))
+// straight into its own buffer.
+core::Result<NpyArray> parse_npy_header(std::span<const unsigned char> file,
+                                        const std::filesystem::path& path);
 
 // Writes a .npy v1.0 file in C order. `descr` is a NumPy dtype string ("<f4", "<i8", "<f8").
 core::Result<void> write_npy(const std::filesystem::path& path, const std::string& descr,
                              const std::vector<std::int64_t>& shape, const void* data,
                              std::size_t bytes);
+// What write_npy writes, as bytes (`path` names the array in errors).
+core::Result<std::string> npy_bytes(const std::filesystem::path& path, const std::string& descr,
+                                    const std::vector<std::int64_t>& shape, const void* data,
+                                    std::size_t bytes);
 
 }  // namespace hotgauge::io

@@ -1,9 +1,13 @@
 #pragma once
 // Recording format v1 (`hotgauge-recording/1`, docs/recording-format.md) on disk.
 #include <filesystem>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "hotgauge/core/recording.hpp"
 #include "hotgauge/core/result.hpp"
+#include "hotgauge/io/bytes.hpp"
 
 namespace hotgauge::io {
 
@@ -13,9 +17,18 @@ inline constexpr const char* kRecordingFormat = "hotgauge-recording/1";
 // what is wrong; findings that are allowed but suspicious (accelerometer not covering the scan
 // with 0.5 s margins, non-finite accelerometer samples) go to Recording::warnings.
 core::Result<core::Recording> read_recording(const std::filesystem::path& dir);
+// The same, its files (`dir / "part.yaml"`, `dir / face / "profiles.npy"`, ...) from `files`.
+core::Result<core::Recording> read_recording(const std::filesystem::path& dir,
+                                             const FileSource& files);
 
 // Writes `rec` as a recording folder (created if needed; existing files are overwritten).
 // Checks the same invariants the reader checks before writing anything.
 core::Result<void> write_recording(const core::Recording& rec, const std::filesystem::path& dir);
+
+// The files write_recording writes, path under `dir` and bytes, in the order it writes them
+// (part.yaml last).
+using RecordingFiles = std::vector<std::pair<std::filesystem::path, std::string>>;
+core::Result<RecordingFiles> recording_files(const core::Recording& rec,
+                                             const std::filesystem::path& dir);
 
 }  // namespace hotgauge::io

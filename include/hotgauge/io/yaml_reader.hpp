@@ -10,9 +10,11 @@
 #include <initializer_list>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "hotgauge/core/result.hpp"
+#include "hotgauge/io/bytes.hpp"
 
 namespace hotgauge::io {
 
@@ -21,7 +23,7 @@ struct YamlError : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
-// Where a syntax error of `file` is: the line (1-based) and what yaml-cpp says. An unclosed '['
+// Where a syntax error in `text` is: the line (1-based) and what yaml-cpp says. An unclosed '['
 // or '{' is reported at the line it was opened on (yaml-cpp names the line where it gave up
 // looking for its end, one or more later), with a note that says so.
 struct YamlSyntaxError {
@@ -29,13 +31,18 @@ struct YamlSyntaxError {
     int column = 0;
     std::string message;
 };
-YamlSyntaxError yaml_syntax_error(const std::string& file, const YAML::Exception& e);
+YamlSyntaxError yaml_syntax_error(std::string_view text, const YAML::Exception& e);
 
 class YamlReader {
   public:
+    // Reads the file `file` when load() is called.
     explicit YamlReader(std::string file) : file_(std::move(file)) {}
+    // `text` as the file named `file` (the caller keeps it alive); existing() asks `exists`.
+    YamlReader(std::string file, std::string_view text, PathExists exists = exists_on_disk)
+        : file_(std::move(file)), text_(text), given_(true), exists_(std::move(exists)) {}
 
-    // Loads the file; throws YamlError("file:line: ...") on I/O or syntax errors.
+    // Parses the text (read from the file first when none was given); throws
+    // YamlError("file:line: ...") on I/O or syntax errors.
     YAML::Node load() const;
 
     // `path` (named by `node`) must exist; one the filesystem cannot look at (a name too long, a
@@ -90,6 +97,10 @@ class YamlReader {
 
   private:
     std::string file_;
+    mutable std::string read_;  // the file's text, when load() read it
+    mutable std::string_view text_;
+    bool given_ = false;
+    PathExists exists_ = exists_on_disk;
 };
 
 }  // namespace hotgauge::io

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -70,6 +71,9 @@ struct PartsRead {
 // must go on with what it can read).
 core::Result<PartsRead> read_parts(const std::filesystem::path& dir, const TimeRange& range = {},
                                    bool skip_bad_lines = false);
+// The lines of one day file's text, `file` naming it in errors.
+core::Result<PartsRead> parse_parts(std::string_view text, const std::filesystem::path& file,
+                                    const TimeRange& range = {}, bool skip_bad_lines = false);
 
 struct FeatureValue {
     std::uint64_t sequence = 0;
