@@ -273,7 +273,7 @@ TEST(Npy, RejectsMalformedFiles) {
 }
 
 // What every file reader reads through (io::read_bytes): a folder or a FIFO is no file, and the
-// FIFO is refused at once, not after a writer comes; a large file (mapped) reads as a small one.
+// FIFO is refused at once, not after a writer comes; a large file reads whole.
 TEST(Npy, OnlyRegularFilesAreRead) {
     TempDir tmp;
     ASSERT_EQ(::mkfifo((tmp.path / "fifo.npy").c_str(), 0600), 0);

@@ -182,8 +182,6 @@ TEST(RecordingIo, RoundTripIsBitExact) {
     EXPECT_TRUE(contains(back->warnings[0], "no accelerometer samples")) << back->warnings[0];
 }
 
-// Issue 18, finding 7: ±Inf in profiles.npy was counted as a point. A point is two finite
-// numbers: an infinite value reads as NaN, the format's "no point".
 // The reader on files in memory (the fuzz harness's entry point) reads what write_recording's
 // files say, as the one on disk does; a file the source lacks is an error naming it.
 TEST(RecordingIo, FilesInMemoryReadAsOnDisk) {
@@ -192,16 +190,21 @@ TEST(RecordingIo, FilesInMemoryReadAsOnDisk) {
     ASSERT_TRUE(write_recording(rec, tmp.path / "part").ok());
     auto on_disk = read_recording(tmp.path / "part");
     ASSERT_TRUE(on_disk.ok()) << on_disk.error().message;
-    auto files = hotgauge::io::recording_files(rec, "mem");
-    ASSERT_TRUE(files.ok()) << files.error().message;
-    EXPECT_EQ(files->back().first, fs::path("mem/part.yaml"));  // the last one written
-    for (const auto& [path, bytes] : *files)
+    std::vector<std::pair<fs::path, std::string>> files;
+    auto made = hotgauge::io::recording_files(rec, "mem", [&](const fs::path& p, std::string&& b) {
+        files.emplace_back(p, std::move(b));
+        return hotgauge::core::Result<void>{};
+    });
+    ASSERT_TRUE(made.ok()) << made.error().message;
+    EXPECT_EQ(files.back().first, fs::path("mem/part.yaml"));  // the last one written
+    for (const auto& [path, bytes] : files)
         EXPECT_EQ(slurp(tmp.path / "part" / path.lexically_relative("mem")), bytes) << path;
     std::string left_out;
     const hotgauge::io::FileSource source =
-        [&](const fs::path& path) -> hotgauge::core::Result<hotgauge::io::Bytes> {
-        for (const auto& [p, bytes] : *files)
-            if (p == path && p.string() != left_out) return hotgauge::io::Bytes::view(bytes);
+        [&](const fs::path& path) -> hotgauge::core::Result<hotgauge::io::FileParts> {
+        for (const auto& [p, bytes] : files)
+            if (p == path && p.string() != left_out)
+                return hotgauge::io::FileParts::of(hotgauge::io::Bytes::view(bytes));
         return hotgauge::core::make_error(path.string() + ": missing");
     };
     auto in_memory = read_recording("mem", source);
@@ -214,6 +217,8 @@ TEST(RecordingIo, FilesInMemoryReadAsOnDisk) {
     EXPECT_EQ(in_memory.error().message, "mem/top/accel_times.npy: missing");
 }
 
+// Issue 18, finding 7: ±Inf in profiles.npy was counted as a point. A point is two finite
+// numbers: an infinite value reads as NaN, the format's "no point".
 TEST(RecordingIo, InfiniteProfileValuesAreNoPoints) {
     TempDir tmp;
     Recording rec = make_recording();

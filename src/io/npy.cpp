@@ -200,8 +200,8 @@ std::optional<std::uint64_t> data_bytes(const std::vector<std::int64_t>& shape,
 }  // namespace
 
 core::Result<NpyArray> parse_npy_header(std::span<const unsigned char> file,
-                                        const std::filesystem::path& path) {
-    const std::size_t file_size = file.size();
+                                        const std::filesystem::path& path,
+                                        std::uint64_t file_size) {
     if (file_size < 8 || !std::equal(kMagic.begin(), kMagic.end(), file.begin()))
         return make_error(where(path) + "not a .npy file (no \\x93NUMPY magic)");
     const int major = file[6], minor = file[7];
@@ -218,6 +218,9 @@ core::Result<NpyArray> parse_npy_header(std::span<const unsigned char> file,
         return make_error(where(path) + "truncated .npy header: header length " +
                           std::to_string(header_len) + " needs " + std::to_string(data_offset) +
                           " bytes, file has " + std::to_string(file_size));
+    if (file.size() < data_offset)
+        return make_error(where(path) + "the header's first " + std::to_string(file.size()) +
+                          " bytes given for a header of " + std::to_string(data_offset));
     const std::string_view header(reinterpret_cast<const char*>(file.data()) + kPreludeV1,
                                   header_len);
     for (char c : header)
@@ -248,7 +251,7 @@ core::Result<NpyArray> parse_npy_header(std::span<const unsigned char> file,
 
 core::Result<NpyArray> parse_npy(std::span<const unsigned char> file,
                                  const std::filesystem::path& path) {
-    auto arr = parse_npy_header(file, path);
+    auto arr = parse_npy_header(file, path, file.size());
     if (!arr) return arr.error();
     const auto data = file.subspan(arr->data_offset, arr->data_bytes);
     arr->data.assign(data.begin(), data.end());

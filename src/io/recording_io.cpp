@@ -5,6 +5,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <bit>
 #include <charconv>
 #include <cmath>
@@ -48,10 +49,17 @@ std::string line_of(const YAML::Node& node) {
 
 // ---- YAML reading helpers. All return an error text without the file prefix. ----
 
+// A YAML file of a recording is a few hundred bytes; one of megabytes is not one.
+constexpr std::uint64_t kYamlMaxBytes = 1 << 20;
+
 Result<YAML::Node> load_yaml(const FileSource& files, const fs::path& path) {
-    auto bytes = files(path);
-    if (!bytes) return bytes.error();
-    const std::string_view text = bytes->text();
+    auto file = files(path);
+    if (!file) return file.error();
+    if (file->size > kYamlMaxBytes)
+        return make_error(where(path) + std::to_string(file->size) +
+                          " bytes, too large for a recording's YAML file");
+    std::string text(static_cast<std::size_t>(file->size), '\0');
+    if (auto ok = file->read(0, text.size(), text.data()); !ok) return ok.error();
     try {
         YAML::Node doc = YAML::Load(std::string(text));
         if (!doc.IsMap())
@@ -250,9 +258,9 @@ std::string shape_str(const std::vector<std::int64_t>& shape) {
     return s + (shape.size() == 1 ? ",)" : ")");
 }
 
-// An array file's bytes and its header.
+// An array file and its header.
 struct Array {
-    Bytes file;
+    FileParts file;
     NpyArray header;
 };
 
@@ -264,7 +272,9 @@ Result<Array> read_array(const FileSource& files, const fs::path& dir, const cha
     const fs::path path = dir / name;
     auto file = files(path);
     if (!file) return file.error();
-    auto arr = parse_npy_header(file->data, path);  // the data is copied after every shape check
+    std::vector<unsigned char> head(std::min<std::uint64_t>(file->size, kNpyHeaderMax));
+    if (auto ok = file->read(0, head.size(), head.data()); !ok) return ok.error();
+    auto arr = parse_npy_header(head, path, file->size);  // the data is read after every check
     if (!arr) return arr.error();
     if (arr->descr != descr)
         return make_error(where(path) + "dtype '" + arr->descr + "', expected '" + descr + "'");
@@ -280,12 +290,11 @@ Result<Array> read_array(const FileSource& files, const fs::path& dir, const cha
     return Array{std::move(*file), std::move(*arr)};
 }
 
-// The data of `a` straight into `out`: the one copy from the file's bytes.
+// The data of `a` straight into `out`: no second copy in memory.
 template <class T>
-void copy_into(const Array& a, std::vector<T>& out) {
+Result<void> read_into(const Array& a, std::vector<T>& out) {
     out.resize(a.header.data_bytes / sizeof(T));
-    if (!out.empty())
-        std::memcpy(out.data(), a.file.data.data() + a.header.data_offset, a.header.data_bytes);
+    return a.file.read(a.header.data_offset, a.header.data_bytes, out.data());
 }
 
 Result<FaceScan> read_face(const FileSource& files, const fs::path& root, const std::string& name) {
@@ -348,11 +357,12 @@ Result<FaceScan> read_face(const FileSource& files, const fs::path& root, const 
                           " entries, expected " + std::to_string(acc->header.shape[0]) +
                           " (one per sample in accel.npy)");
     f.width = prof->header.shape[1];
-    copy_into(*prof, f.profiles_mm);
-    copy_into(*pt, f.profile_times_ns);
-    copy_into(*pp, f.profile_positions_mm);
-    copy_into(*acc, f.accel_mps2);
-    copy_into(*at, f.accel_times_ns);
+    // One after the other: the first file that cannot be read ends it.
+    if (auto ok = read_into(*prof, f.profiles_mm); !ok) return ok.error();
+    if (auto ok = read_into(*pt, f.profile_times_ns); !ok) return ok.error();
+    if (auto ok = read_into(*pp, f.profile_positions_mm); !ok) return ok.error();
+    if (auto ok = read_into(*acc, f.accel_mps2); !ok) return ok.error();
+    if (auto ok = read_into(*at, f.accel_times_ns); !ok) return ok.error();
     // A point is a pair of finite numbers; ±Inf is no more a point than NaN is.
     for (float& v : f.profiles_mm)
         if (!std::isfinite(v)) v = std::numeric_limits<float>::quiet_NaN();
@@ -426,8 +436,8 @@ Result<void> validate(const Recording& rec, const fs::path& dir) {
     return {};
 }
 
-// face.yaml and the arrays of `f`, as files under `dir`.
-Result<void> face_files(const FaceScan& f, const fs::path& dir, RecordingFiles& out) {
+// face.yaml and the arrays of `f`, as files under `dir`, each to `out` as soon as it is made.
+Result<void> face_files(const FaceScan& f, const fs::path& dir, const RecordingFile& out) {
     const Eigen::Matrix4d T = f.T_world_camera.matrix();
     std::string y = "camera_to_world: [";
     for (int r = 0; r < 4; ++r) {
@@ -444,15 +454,14 @@ Result<void> face_files(const FaceScan& f, const fs::path& dir, RecordingFiles& 
     if (f.travel_scale != 1.0) y += "travel_scale: " + fmt_double(f.travel_scale) + "\n";
     if (f.clock_offset_ns != 0) y += "clock_offset_ns: " + std::to_string(f.clock_offset_ns) + "\n";
     if (f.geometry_from_calibration) y += "geometry_source: calibration\n";
-    out.emplace_back(dir / "face.yaml", std::move(y));
+    if (auto ok = out(dir / "face.yaml", std::move(y)); !ok) return ok;
 
     const std::int64_t N = f.n_profiles(), K = f.n_accel();
     const auto array = [&](const char* name, const char* descr, std::vector<std::int64_t> shape,
                            const auto& v) -> Result<void> {
         auto bytes = npy_bytes(dir / name, descr, shape, v.data(), v.size() * sizeof(v[0]));
         if (!bytes) return bytes.error();
-        out.emplace_back(dir / name, std::move(*bytes));
-        return {};
+        return out(dir / name, std::move(*bytes));
     };
     if (auto ok = array("profiles.npy", "<f4", {N, f.width, 2}, f.profiles_mm); !ok) return ok;
     if (auto ok = array("profile_times.npy", "<i8", {N}, f.profile_times_ns); !ok) return ok;
@@ -474,16 +483,15 @@ core::Result<core::Recording> read_recording(const std::filesystem::path& dir,
 }
 
 core::Result<core::Recording> read_recording(const std::filesystem::path& dir) {
-    return read_recording(dir, read_bytes);
+    return read_recording(dir, open_parts);
 }
 
-core::Result<RecordingFiles> recording_files(const core::Recording& rec,
-                                             const std::filesystem::path& dir) {
+core::Result<void> recording_files(const core::Recording& rec, const std::filesystem::path& dir,
+                                   const RecordingFile& file) {
     try {
-        if (auto ok = validate(rec, dir); !ok) return ok.error();
-        RecordingFiles files;
+        if (auto ok = validate(rec, dir); !ok) return ok;
         for (const FaceScan& f : rec.faces)
-            if (auto ok = face_files(f, dir / f.name, files); !ok) return ok.error();
+            if (auto ok = face_files(f, dir / f.name, file); !ok) return ok;
         std::string y = "format: " + std::string(kRecordingFormat) + "\n";
         y += "part_id: " + quote(rec.part_id) + "\n";
         y += "recipe: " + quote(rec.recipe) + "\n";
@@ -493,28 +501,25 @@ core::Result<RecordingFiles> recording_files(const core::Recording& rec,
         for (std::size_t i = 0; i < rec.faces.size(); ++i)
             y += (i ? ", " : "") + quote(rec.faces[i].name);
         y += "]\n";
-        files.emplace_back(dir / "part.yaml", std::move(y));
-        return files;
+        return file(dir / "part.yaml", std::move(y));
     } catch (const std::exception& e) {
         return make_error(where(dir) + "cannot write recording: " + e.what());
     }
 }
 
 core::Result<void> write_recording(const core::Recording& rec, const std::filesystem::path& dir) {
-    auto files = recording_files(rec, dir);
-    if (!files) return files.error();
+    if (auto ok = validate(rec, dir); !ok) return ok;  // before anything is removed
     std::error_code ec;
     fs::remove(dir / "part.yaml", ec);  // see below
     // part.yaml last: a recording interrupted while writing has no part.yaml and is not mistaken
-    // for a complete one.
-    for (const auto& [path, bytes] : *files) {
+    // for a complete one. Each file is written as soon as it is made: one file in memory at once.
+    return recording_files(rec, dir, [&](const fs::path& path, std::string&& bytes) {
         fs::create_directories(path.parent_path(), ec);
         if (ec)
-            return make_error(where(path.parent_path()) +
-                              "cannot create directory: " + ec.message());
-        if (auto ok = write_text(path, bytes); !ok) return ok;
-    }
-    return {};
+            return Result<void>(
+                make_error(where(path.parent_path()) + "cannot create directory: " + ec.message()));
+        return write_text(path, bytes);
+    });
 }
 
 }  // namespace hotgauge::io

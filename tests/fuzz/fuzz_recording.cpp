@@ -12,7 +12,9 @@
 // recording it accepts is accepted by recording_files (write_recording's files: the writer
 // refuses only what the reader rejects) and reads back identical from them.
 #include <cstring>
+#include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "fuzz_util.hpp"
@@ -65,9 +67,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         return s;
     }();
     const auto pieces = split(fuzz::text_of(data, size));
-    const io::FileSource files = [&](const fs::path& path) -> core::Result<io::Bytes> {
+    const io::FileSource files = [&](const fs::path& path) -> core::Result<io::FileParts> {
         for (std::size_t i = 0; i < slots.size() && i < pieces.size(); ++i)
-            if (path == slots[i]) return io::Bytes::view(pieces[i]);
+            if (path == slots[i]) return io::FileParts::of(io::Bytes::view(pieces[i]));
         return core::make_error(path.string() + ": missing");
     };
     auto rec = fuzz::no_throw("read_recording", [&] { return io::read_recording(dir, files); });
@@ -78,13 +80,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     fuzz::check(!rec->faces.empty(), "a recording without faces was accepted");
 
     const fs::path copy = fuzz::kDir / "copy";
-    auto written =
-        fuzz::no_throw("recording_files", [&] { return io::recording_files(*rec, copy); });
-    fuzz::check(written.ok(), "recording_files refused a recording read_recording accepted: " +
-                                  (written ? std::string() : written.error().message));
-    const io::FileSource written_files = [&](const fs::path& path) -> core::Result<io::Bytes> {
-        for (const auto& [p, bytes] : *written)
-            if (p == path) return io::Bytes::view(bytes);
+    std::vector<std::pair<fs::path, std::string>> written;
+    auto ok = fuzz::no_throw("recording_files", [&] {
+        return io::recording_files(*rec, copy, [&](const fs::path& p, std::string&& bytes) {
+            written.emplace_back(p, std::move(bytes));
+            return core::Result<void>{};
+        });
+    });
+    fuzz::check(ok.ok(), "recording_files refused a recording read_recording accepted: " +
+                             (ok ? std::string() : ok.error().message));
+    const io::FileSource written_files = [&](const fs::path& path) -> core::Result<io::FileParts> {
+        for (const auto& [p, bytes] : written)
+            if (p == path) return io::FileParts::of(io::Bytes::view(bytes));
         return core::make_error(path.string() + ": missing");
     };
     auto again =

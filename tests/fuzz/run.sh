@@ -5,7 +5,8 @@
 #     (libFuzzer's -merge=1; nothing is removed, so regression inputs stay; FUZZ_CORPUS_MAX_KB
 #     caps a corpus, smallest new inputs first);
 #   - a line per harness is appended to tests/fuzz/ledger.tsv: date, harness, the commit the run
-#     was built from (+dirty when the tree had changes), executions, seconds, findings.
+#     was built from (+dirty when the tree had changes, +stale when the binary is older than a
+#     source), executions, seconds it ran, findings.
 # Commit both after a run. FUZZ_NO_LEDGER=1 leaves the corpus and the ledger alone.
 # Exit status 1 when any harness had a finding (crash, failed check, timeout, out of memory); its
 # reproducer is in FINDINGS/<harness>/, its log in LOGS/<harness>.log. Replay it in the sanitizer
@@ -42,8 +43,15 @@ fuzz_one() {
         echo "$h: $bin not built" >"$out"
         return 1
     fi
-    mkdir -p "$work/$h/run" "$work/$h/merged" "$findings/$h"
-    cp "$here/corpus/$h/"* "$work/$h/run/"
+    mkdir -p "$work/$h/run" "$work/$h/merged" "$findings/$h" "$here/corpus/$h"
+    cp "$here/corpus/$h/"* "$work/$h/run/" 2>/dev/null
+    # A binary older than a source of the project was not built from this commit: its run is
+    # recorded as such and does not count (ledger.py).
+    local built=$commit
+    if [ -n "$(find "$repo/src" "$repo/include" "$here" -name '*.[ch]pp' -newer "$bin" | head -1)" ]; then
+        built=$commit+stale
+    fi
+    local started=$SECONDS
     local flags=()
     [ -f "$here/$h.dict" ] && flags+=(-dict="$here/$h.dict")
     # <harness>.args: that harness's own libFuzzer flags (its -max_len).
@@ -55,6 +63,7 @@ fuzz_one() {
         -print_final_stats=1 -artifact_prefix="$findings/$h/" "${flags[@]}" "${own[@]}" \
         ${FUZZ_ARGS:-} "$work/$h/run" >"$logs/$h.log" 2>&1
     local rc=$?
+    local took=$((SECONDS - started))
     local runs rate result
     runs=$(grep -h 'stat::number_of_executed_units' "$logs/$h.log" | awk '{s += $2} END {print s + 0}')
     rate=$(grep -h 'stat::average_exec_per_sec' "$logs/$h.log" | awk '{s += $2} END {print s + 0}')
@@ -69,10 +78,10 @@ fuzz_one() {
     fi
     if [ -z "${FUZZ_NO_LEDGER:-}" ]; then
         merge_back "$h" "$bin" "${own[@]}" >>"$logs/$h.log" 2>&1
-        printf '%s\t%s\t%s\t%s\t%s\t%s\n' "$(date -u +%Y-%m-%dT%H:%M:%SZ)" "$h" "$commit" "$runs" \
-            "$seconds" "$found" >"$work/$h.ledger"
+        printf '%s\t%s\t%s\t%s\t%s\t%s\n' "$(date -u +%Y-%m-%dT%H:%M:%SZ)" "$h" "$built" "$runs" \
+            "$took" "$found" >"$work/$h.ledger"
     fi
-    printf '%-20s %8s %12s %10s %8s  %s\n' "$h" "$seconds" "$runs" "$rate" \
+    printf '%-20s %8s %12s %10s %8s  %s\n' "$h" "$took" "$runs" "$rate" \
         "$(ls "$here/corpus/$h" | wc -l)" "$result" >"$out"
     if [ $rc -ne 0 ]; then
         grep -hE 'ERROR: |FUZZ CHECK FAILED|SUMMARY: |threw |^    #[0-9] ' "$logs/$h.log" | head -12 |
@@ -101,7 +110,7 @@ merge_back() {
 }
 
 export -f fuzz_one merge_back
-export here build seconds findings logs cap_kb work commit
+export here repo build seconds findings logs cap_kb work commit
 
 printf '%-20s %8s %12s %10s %8s  %s\n' harness seconds executions exec/s corpus result
 printf '%s\n' "${harnesses[@]}" | xargs -P "${FUZZ_PARALLEL:-1}" -I{} bash -c 'fuzz_one {}'

@@ -4,10 +4,12 @@
 // point that reads the bytes with read_bytes and passes the file's name. What a reader asks the
 // file system besides (does a file the recipe names exist? the files of a recording's folder) is
 // passed in as a function, which a harness answers from memory.
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <memory>
 #include <span>
+#include <string>
 #include <string_view>
 #include <system_error>
 
@@ -15,8 +17,8 @@
 
 namespace hotgauge::io {
 
-// A file's bytes. `owner` keeps them alive (the buffer they were read into, or a read-only
-// mapping); null when the caller keeps them (view()).
+// A file's bytes. `owner` keeps them alive (the buffer they were read into); null when the
+// caller keeps them (view()).
 struct Bytes {
     std::span<const unsigned char> data;
     std::shared_ptr<const void> owner;
@@ -28,16 +30,31 @@ struct Bytes {
     static Bytes view(std::string_view s) {
         return {{reinterpret_cast<const unsigned char*>(s.data()), s.size()}, nullptr};
     }
+    static Bytes view(std::string&&) = delete;  // a temporary would be gone before the read
 };
 
-// The whole file: large files mapped read-only (no copy until a reader copies what it keeps),
-// small ones read. An Error names the file: "FILE: missing", "not a regular file", "cannot open:
-// <why>", "read error".
+// The whole file (a regular file only: a folder, a FIFO or a device is refused). An Error names
+// the file: "FILE: missing", "not a regular file", "cannot open: <why>", "read error: <why>",
+// "too large to read".
 core::Result<Bytes> read_bytes(const std::filesystem::path& file);
 
+// A file read in parts: its size, then the bytes a reader needs, where it needs them. A large
+// file's header is checked before its data is read (a header that announces 4 GiB costs nothing),
+// and the data lands straight in the reader's own buffer: one copy.
+struct FileParts {
+    std::uint64_t size = 0;
+    // `n` bytes at `offset` into `out`; an Error names the file (one that shrank included).
+    std::function<core::Result<void>(std::uint64_t offset, std::size_t n, void* out)> read;
+
+    // Bytes in memory (alive while `bytes.owner` or the caller keeps them).
+    static FileParts of(Bytes bytes);
+};
+// A file on disk, opened (a regular file only); read() reads it with pread.
+core::Result<FileParts> open_parts(const std::filesystem::path& file);
+
 // Files by path, as a reader of several files asks for them (a recording's part.yaml, its faces'
-// arrays): read_bytes on disk, a table in memory. A file it does not have is an Error naming it.
-using FileSource = std::function<core::Result<Bytes>(const std::filesystem::path& file)>;
+// arrays): open_parts on disk, a table in memory. A file it does not have is an Error naming it.
+using FileSource = std::function<core::Result<FileParts>(const std::filesystem::path& file)>;
 
 // Does `path` exist? Sets `ec` when it cannot be told (a name too long, a symlink loop, no
 // permission).

@@ -25,11 +25,13 @@ core::Result<NpyArray> read_npy(const std::filesystem::path& path);
 // The same on the file's bytes, `path` naming it in errors.
 core::Result<NpyArray> parse_npy(std::span<const unsigned char> file,
                                  const std::filesystem::path& path);
-// The header only (`data` stays empty), checked against the file's size: a reader checks shapes
-// before it allocates anything, then copies the data (file.subspan(data_offset, data_bytes))
-// straight into its own buffer.
+// The header only (`data` stays empty) from the file's first bytes (`file`: at least
+// min(file_size, kNpyHeaderMax) of them), checked against the file's size: a reader checks
+// shapes before it allocates anything, then reads the data (data_bytes at data_offset) straight
+// into its own buffer.
+inline constexpr std::size_t kNpyHeaderMax = 10 + 0xFFFF;  // prelude + the longest header
 core::Result<NpyArray> parse_npy_header(std::span<const unsigned char> file,
-                                        const std::filesystem::path& path);
+                                        const std::filesystem::path& path, std::uint64_t file_size);
 
 // Writes a .npy v1.0 file in C order. `descr` is a NumPy dtype string ("<f4", "<i8", "<f8").
 core::Result<void> write_npy(const std::filesystem::path& path, const std::string& descr,

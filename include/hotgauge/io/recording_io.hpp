@@ -1,9 +1,8 @@
 #pragma once
 // Recording format v1 (`hotgauge-recording/1`, docs/recording-format.md) on disk.
 #include <filesystem>
+#include <functional>
 #include <string>
-#include <utility>
-#include <vector>
 
 #include "hotgauge/core/recording.hpp"
 #include "hotgauge/core/result.hpp"
@@ -25,10 +24,11 @@ core::Result<core::Recording> read_recording(const std::filesystem::path& dir,
 // Checks the same invariants the reader checks before writing anything.
 core::Result<void> write_recording(const core::Recording& rec, const std::filesystem::path& dir);
 
-// The files write_recording writes, path under `dir` and bytes, in the order it writes them
-// (part.yaml last).
-using RecordingFiles = std::vector<std::pair<std::filesystem::path, std::string>>;
-core::Result<RecordingFiles> recording_files(const core::Recording& rec,
-                                             const std::filesystem::path& dir);
+// The files write_recording writes, in the order it writes them (part.yaml last), each handed to
+// `file` (its path under `dir`, its bytes) as soon as it is made; an Error from `file` ends it.
+using RecordingFile =
+    std::function<core::Result<void>(const std::filesystem::path& path, std::string&& bytes)>;
+core::Result<void> recording_files(const core::Recording& rec, const std::filesystem::path& dir,
+                                   const RecordingFile& file);
 
 }  // namespace hotgauge::io

@@ -40,6 +40,8 @@ class YamlReader {
     // `text` as the file named `file` (the caller keeps it alive); existing() asks `exists`.
     YamlReader(std::string file, std::string_view text, PathExists exists = exists_on_disk)
         : file_(std::move(file)), text_(text), given_(true), exists_(std::move(exists)) {}
+    YamlReader(const YamlReader&) = delete;  // text_ may point into read_
+    YamlReader& operator=(const YamlReader&) = delete;
 
     // Parses the text (read from the file first when none was given); throws
     // YamlError("file:line: ...") on I/O or syntax errors.
