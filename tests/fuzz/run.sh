@@ -78,8 +78,14 @@ fuzz_one() {
     fi
     if [ -z "${FUZZ_NO_LEDGER:-}" ]; then
         merge_back "$h" "$bin" "${own[@]}" >>"$logs/$h.log" 2>&1
-        printf '%s\t%s\t%s\t%s\t%s\t%s\n' "$(date -u +%Y-%m-%dT%H:%M:%SZ)" "$h" "$built" "$runs" \
-            "$took" "$found" >"$work/$h.ledger"
+        # Appended as soon as the harness ends (a run stopped later keeps what was done), one
+        # writer at a time.
+        (
+            flock 9
+            [ -s "$ledger" ] || printf 'date\tharness\tcommit\texecutions\tseconds\tfindings\n' >"$ledger"
+            printf '%s\t%s\t%s\t%s\t%s\t%s\n' "$(date -u +%Y-%m-%dT%H:%M:%SZ)" "$h" "$built" "$runs" \
+                "$took" "$found" >>"$ledger"
+        ) 9>>"$ledger"
     fi
     printf '%-20s %8s %12s %10s %8s  %s\n' "$h" "$took" "$runs" "$rate" \
         "$(ls "$here/corpus/$h" | wc -l)" "$result" >"$out"
@@ -110,17 +116,13 @@ merge_back() {
 }
 
 export -f fuzz_one merge_back
-export here repo build seconds findings logs cap_kb work commit
+export here repo build seconds findings logs cap_kb work commit ledger
 
 printf '%-20s %8s %12s %10s %8s  %s\n' harness seconds executions exec/s corpus result
 printf '%s\n' "${harnesses[@]}" | xargs -P "${FUZZ_PARALLEL:-1}" -I{} bash -c 'fuzz_one {}'
 status=$?
 for h in "${harnesses[@]}"; do
     cat "$work/$h.out" 2>/dev/null
-    if [ -f "$work/$h.ledger" ]; then
-        [ -f "$ledger" ] || printf 'date\tharness\tcommit\texecutions\tseconds\tfindings\n' >"$ledger"
-        cat "$work/$h.ledger" >>"$ledger"
-    fi
 done
 [ $status -eq 0 ] || exit 1
 exit 0
