@@ -164,6 +164,18 @@ TEST(Daemon, ACameraThatIsNotThereFailsThePartWithItsReasonAndTheDaemonGoesOn) {
     EXPECT_EQ((*daemon)->stats().rejected_reloads, 2u);
     plc.command(3);
     EXPECT_TRUE(plc.wait_state(plc::State::kIdle, 5s)) << "still serving the PLC";
+    // STATUS= follows the registers from the daemon's own thread: wait (bounded) for the idle
+    // state's, so that the good reload below does not overtake it.
+    const auto idle_said = [&] {
+        std::lock_guard lock(status_mutex);
+        const auto rejected = std::find_if(status.begin(), status.end(), [](const auto& s) {
+            return s.find("— reload rejected at ") != std::string::npos;
+        });
+        return rejected != status.end() &&
+               std::any_of(rejected + 1, status.end(),
+                           [](const auto& s) { return s.rfind("idle", 0) == 0; });
+    };
+    for (int i = 0; i < 250 && !idle_said(); ++i) std::this_thread::sleep_for(20ms);
     write(config, config_text(results));
     (*daemon)->request_reload();
     const auto until2 = std::chrono::steady_clock::now() + 5s;
