@@ -24,6 +24,7 @@
 #include <thread>
 #include <vector>
 
+#include "accel_test_helpers.hpp"
 #include "hotgauge/accel/iio.hpp"
 #include "hotgauge/accel/replay.hpp"
 #include "hotgauge/accel/ring.hpp"
@@ -42,47 +43,15 @@ constexpr std::int64_t kMs = 1'000'000;
 
 using hotgauge::test::TempDir;
 
-void write_text(const fs::path& p, const std::string& text) {
-    fs::create_directories(p.parent_path());
-    std::ofstream(p, std::ios::trunc) << text << "\n";
-}
-
-std::string read_text(const fs::path& p) {
-    std::ifstream in(p);
-    std::string s;
-    std::getline(in, s);
-    return s;
-}
-
-// A bounded wait on a condition nobody can notify (a thread's final state).
-bool eventually(const std::function<bool()>& done, std::chrono::milliseconds timeout = 5s) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    while (!done()) {
-        if (std::chrono::steady_clock::now() > deadline) return false;
-        std::this_thread::yield();
-    }
-    return true;
-}
-
 AccelSample sample_at(std::int64_t t_ns) {
     const auto k = static_cast<float>(t_ns / kMs);
     return {t_ns, k, -k, 0.5f * k};
 }
 
-// Bitwise equality, so NaNs compare too.
-bool same_bits(float a, float b) {
-    return std::bit_cast<std::uint32_t>(a) == std::bit_cast<std::uint32_t>(b);
-}
-
-void expect_samples_eq(const std::vector<AccelSample>& got, const std::vector<AccelSample>& want) {
-    ASSERT_EQ(got.size(), want.size());
-    for (std::size_t i = 0; i < got.size(); ++i) {
-        EXPECT_EQ(got[i].t_ns, want[i].t_ns) << "sample " << i;
-        EXPECT_TRUE(same_bits(got[i].x_mps2, want[i].x_mps2)) << "sample " << i;
-        EXPECT_TRUE(same_bits(got[i].y_mps2, want[i].y_mps2)) << "sample " << i;
-        EXPECT_TRUE(same_bits(got[i].z_mps2, want[i].z_mps2)) << "sample " << i;
-    }
-}
+using hotgauge::test::eventually;
+using hotgauge::test::expect_samples_eq;
+using hotgauge::test::read_line;
+using hotgauge::test::write_text;
 
 std::vector<std::int64_t> times_of(const std::vector<AccelSample>& s) {
     std::vector<std::int64_t> t;
@@ -951,12 +920,12 @@ TEST(Iio, EnableAndDisableWriteSysfs) {
     EXPECT_FALSE(read_iio_layout(tmp.path).ok());
     ASSERT_TRUE(enable_iio_buffer(tmp.path, 512));
     for (const char* ch : {"in_accel_x", "in_accel_y", "in_accel_z", "in_timestamp"})
-        EXPECT_EQ(read_text(tmp.path / "scan_elements" / (std::string(ch) + "_en")), "1") << ch;
-    EXPECT_EQ(read_text(tmp.path / "buffer/length"), "512");
-    EXPECT_EQ(read_text(tmp.path / "buffer/enable"), "1");
+        EXPECT_EQ(read_line(tmp.path / "scan_elements" / (std::string(ch) + "_en")), "1") << ch;
+    EXPECT_EQ(read_line(tmp.path / "buffer/length"), "512");
+    EXPECT_EQ(read_line(tmp.path / "buffer/enable"), "1");
     EXPECT_TRUE(read_iio_layout(tmp.path).ok());
     ASSERT_TRUE(disable_iio_buffer(tmp.path));
-    EXPECT_EQ(read_text(tmp.path / "buffer/enable"), "0");
+    EXPECT_EQ(read_line(tmp.path / "buffer/enable"), "0");
 
     fs::remove_all(tmp.path / "buffer");
     auto r = enable_iio_buffer(tmp.path, 512);

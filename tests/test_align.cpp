@@ -71,8 +71,8 @@ TEST(CalibrateFaces, RecoversThePerturbedVirtualCell) {
         ASSERT_TRUE(cal) << cal.error().message;
         EXPECT_EQ(cal->method, "artifact");
         for (const auto& t : c.truth.faces) {
-            const calib::FaceGeometry* g = cal->face(t.name);
-            const calib::FaceGeometry* n = c.nominal.face(t.name);
+            const calib::FaceCalibration* g = cal->face(t.name);
+            const calib::FaceCalibration* n = c.nominal.face(t.name);
             ASSERT_TRUE(g && n);
             const double dt =
                 (g->T_world_camera.translation() - t.T_world_camera.translation()).norm();
@@ -146,7 +146,7 @@ TEST(CalibrateFaces, QuickCellAligns) {
                                       hotgauge::test::quick_cell_limits());
     ASSERT_TRUE(cal) << cal.error().message;
     for (const auto& t : c.truth.faces) {
-        const calib::FaceGeometry* g = cal->face(t.name);
+        const calib::FaceCalibration* g = cal->face(t.name);
         ASSERT_TRUE(g);
         EXPECT_LT((g->T_world_camera.translation() - t.T_world_camera.translation()).norm(), 0.05)
             << t.name;

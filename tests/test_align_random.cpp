@@ -101,7 +101,7 @@ struct Coverage {
 void count_within_3_sigma(const calib::Calibration& cal, const calib::Calibration& truth,
                           Coverage& cov) {
     for (const auto& t : truth.faces) {
-        const calib::FaceGeometry* g = cal.face(t.name);
+        const calib::FaceCalibration* g = cal.face(t.name);
         ASSERT_TRUE(g);
         auto sig = [&](const std::string& key) { return cal.residuals.at(t.name + "." + key); };
         const Eigen::Vector3d dp = g->T_world_camera.translation() - t.T_world_camera.translation();

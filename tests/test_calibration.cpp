@@ -32,7 +32,7 @@ calib::Calibration example() {
     c.clock_offset_ns = -1'234'567;
     c.accel_bias_mps2 = {0.01, -0.002, 0.0071};
     for (const char* name : {"top", "side1"}) {
-        calib::FaceGeometry g;
+        calib::FaceCalibration g;
         g.name = name;
         g.T_world_camera = Eigen::Translation3d(1.0 / 3.0, -120.0, 930.0) *
                            Eigen::AngleAxisd(0.1234, Eigen::Vector3d(1, 2, 3).normalized());
@@ -309,7 +309,7 @@ TEST(Calibration, ApplyGeometryReplacesWhatTheCaptureApplied) {
 // the calibrated pose whatever it says. The keys survive write and read.
 TEST(Calibration, ApplyGeometryCorrectsAHeadPlacedElsewhere) {
     calib::Calibration c = example();
-    calib::FaceGeometry& g = c.faces[0];
+    calib::FaceCalibration& g = c.faces[0];
     Eigen::Isometry3d claimed = g.T_world_camera;
     claimed.translation() += Eigen::Vector3d(0.7, -0.4, 1.5);
     claimed.linear() =

@@ -11,8 +11,8 @@
 #include <thread>
 
 #include "hotgauge/cell/daemon.hpp"
-#include "hotgauge/io/model_io.hpp"
 #include "hotgauge/io/recipe.hpp"
+#include "hotgauge/model/model_io.hpp"
 #include "hotgauge/pipeline/pipeline.hpp"
 #include "hotgauge/plc/register_map.hpp"
 #include "hotgauge/vcell/axis_server.hpp"
@@ -310,10 +310,10 @@ TEST(Daemon, ASavedModelMustBeTheSlotsPart) {
     auto built = pipeline::part_model(*recipe);
     ASSERT_TRUE(built) << built.error().message;
     const auto own = dir.path / "hub-a.hgm", other = dir.path / "hub-b.hgm";
-    ASSERT_TRUE(io::write_model(*built, own));
+    ASSERT_TRUE(model::write_model(*built, own));
     match::Model renamed = *built;
     renamed.name = "hub-b";
-    ASSERT_TRUE(io::write_model(renamed, other));
+    ASSERT_TRUE(model::write_model(renamed, other));
     const auto config = dir.path / "hotgauged.yaml";
     write(config, config_text(dir.path / "results") + "models:\n  1: " + other.string() + "\n");
     auto setup = cell::load_setup(config);

@@ -27,18 +27,18 @@
 #include <string>
 #include <vector>
 
-#include "hotgauge/io/model_io.hpp"
 #include "hotgauge/io/recipe.hpp"
-#include "hotgauge/io/surface_io.hpp"
 #include "hotgauge/match/model.hpp"
+#include "hotgauge/model/model_io.hpp"
+#include "hotgauge/model/surface_io.hpp"
 
 namespace fs = std::filesystem;
-using hotgauge::io::read_mesh_samples;
-using hotgauge::io::read_model;
-using hotgauge::io::read_scan_samples;
-using hotgauge::io::SurfaceSamples;
-using hotgauge::io::write_model;
 using hotgauge::match::Model;
+using hotgauge::model::read_mesh_samples;
+using hotgauge::model::read_model;
+using hotgauge::model::read_scan_samples;
+using hotgauge::model::SurfaceSamples;
+using hotgauge::model::write_model;
 
 namespace {
 

@@ -16,6 +16,7 @@
 #include "hotgauge/core/geometry.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/io/recording_io.hpp"
+#include "hotgauge/sim/geometry.hpp"
 #include "hotgauge/sim/simulator.hpp"
 #include "hotgauge/sim/vibration.hpp"
 
@@ -45,6 +46,33 @@ fs::path temp_dir(const std::string& name) {
     fs::remove_all(p);
     return p;
 }
+
+// A cell config file with one key edited: its text, where `key` is (line, 1-based; empty when
+// the file lacks it), and the edited file read back from a temporary folder (removed with it).
+struct CellEdit {
+    CellEdit(const fs::path& file, std::string key_text, const std::string& name)
+        : key(std::move(key_text)), dir(temp_dir(name)) {
+        std::ifstream in(file);
+        std::stringstream buffer;
+        buffer << in.rdbuf();
+        text = buffer.str();
+        at = text.find(key);
+        if (at != std::string::npos)
+            line = std::to_string(
+                1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n'));
+        fs::create_directories(dir);
+    }
+    ~CellEdit() { fs::remove_all(dir); }
+    core::Result<sim::CellConfig> with(const std::string& replacement) const {
+        std::string t = text;
+        t.replace(at, key.size(), replacement);
+        std::ofstream(dir / "cell.yaml") << t;
+        return sim::read_cell_config(dir / "cell.yaml");
+    }
+    std::string key, text, line;
+    std::size_t at = std::string::npos;
+    fs::path dir;
+};
 
 // Distance of a world point to the simulated scene of `face`: the hot part or the support plate
 // (a square at z = 0; noise may carry a point lit at its very edge a little past it, as the side
@@ -357,35 +385,40 @@ TEST(CellConfig, ImagerOcclusionIsReadStrictly) {
         EXPECT_LT((at_mid_scan - Eigen::Vector3d(j == 2 ? -69.2 : 69.2, 0, 55.15)).norm(), 1e-9);
     }
 
-    std::ifstream in(side15);
-    std::stringstream buffer;
-    buffer << in.rdbuf();
-    const std::string text = buffer.str();
-    const std::string key = "imager_occlusion: true";
-    const auto at = text.find(key);
-    ASSERT_NE(at, std::string::npos);
-    const auto line = std::to_string(
-        1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n'));
-    const fs::path dir = temp_dir("cell_config");
-    fs::create_directories(dir);
-    auto with_value = [&](const std::string& value) {
-        std::string t = text;
-        t.replace(at, key.size(), "imager_occlusion: " + value);
-        const fs::path f = dir / "cell.yaml";
-        std::ofstream(f) << t;
-        return sim::read_cell_config(f);
-    };
+    const CellEdit edit(side15, "imager_occlusion: true", "cell_config");
+    ASSERT_FALSE(edit.line.empty());
+    auto with_value = [&](const std::string& v) { return edit.with("imager_occlusion: " + v); };
     auto off = with_value("false");
     ASSERT_TRUE(off) << off.error().message;
     EXPECT_FALSE(off->sensor.imager_occlusion);
     for (const std::string bad : {"maybe", "[true]", "1.5"}) {
         auto r = with_value(bad);
         ASSERT_FALSE(r) << bad;
-        EXPECT_NE(r.error().message.find("cell.yaml:" + line + ": sensor.imager_occlusion"),
+        EXPECT_NE(r.error().message.find("cell.yaml:" + edit.line + ": sensor.imager_occlusion"),
                   std::string::npos)
             << r.error().message;
     }
-    fs::remove_all(dir);
+}
+
+// The imager is where the triangulation puts it, beside the laser along the camera's y
+// (acquire::SensorDesign's baseline): another place is refused, naming the line and the key.
+TEST(Simulator, ImagerOffTheBaselineIsRefused) {
+    const CellEdit edit(HOTGAUGE_SOURCE_DIR "/config/cell.yaml", "camera_center_mm: [0, 300, 0]",
+                        "imager");
+    ASSERT_FALSE(edit.line.empty());
+    auto with_value = [&](const std::string& v) { return edit.with("camera_center_mm: " + v); };
+    auto wide = with_value("[0, 350, 0]");
+    ASSERT_TRUE(wide) << wide.error().message;
+    EXPECT_EQ(wide->sensor.baseline_mm, 350.0);
+    EXPECT_EQ(wide->sensor.imager_mm(), Eigen::Vector3d(0.0, 350.0, 0.0));
+    EXPECT_EQ(sim::sensor_model(wide->sensor).baseline_mm, 350.0);
+    for (const std::string bad : {"[5, 300, 0]", "[0, 300, 2]", "[0, -300, 0]"}) {
+        auto r = with_value(bad);
+        ASSERT_FALSE(r) << bad;
+        EXPECT_NE(r.error().message.find("cell.yaml:" + edit.line + ": sensor.camera_center_mm"),
+                  std::string::npos)
+            << r.error().message;
+    }
 }
 
 TEST(Simulator, BadFaceRequestIsAnError) {

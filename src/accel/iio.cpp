@@ -170,15 +170,12 @@ std::int64_t iio_element_value(const IioScanType& t, const std::uint8_t* p) {
     return static_cast<std::int64_t>(raw);
 }
 
-core::Result<IioLayout> read_iio_layout(const fs::path& dir) {
-    const fs::path scan = dir / "scan_elements";
-    std::error_code ec;
-    if (!fs::is_directory(scan, ec))
-        return core::make_error(scan.string() +
-                                ": missing (not an IIO device with a buffer, or the wrong "
-                                "sysfs directory)");
+namespace {
 
-    // Every enabled scan element occupies room in a record, whether we use it or not.
+// The scan elements' names ("in_accel_x" for in_accel_x_en), sorted. Every enabled scan element
+// occupies room in a record, whether we use it or not.
+core::Result<std::vector<std::string>> list_scan_elements(const fs::path& scan) {
+    std::error_code ec;
     std::vector<std::string> names;
     for (const auto& entry : fs::directory_iterator(scan, ec)) {
         const std::string file = entry.path().filename().string();
@@ -187,42 +184,44 @@ core::Result<IioLayout> read_iio_layout(const fs::path& dir) {
     }
     if (ec) return core::make_error(scan.string() + ": cannot list: " + ec.message());
     std::sort(names.begin(), names.end());
+    return names;
+}
 
-    IioLayout layout;
-    std::map<int, std::string> by_index;
-    for (const auto& name : names) {
-        const fs::path en_path = scan / (name + "_en");
-        auto en = read_required(en_path, "");
-        if (!en) return en.error();
-        if (*en != "0" && *en != "1")
-            return core::make_error(en_path.string() + ": expected 0 or 1, found '" + *en + "'");
-        if (*en == "0") continue;
+// One scan element: nullopt when it is not enabled. `by_index` holds the enabled ones' indices
+// so far (name by index): two elements on one index are an error.
+core::Result<std::optional<IioChannel>> read_scan_element(const fs::path& scan,
+                                                          const std::string& name,
+                                                          std::map<int, std::string>& by_index) {
+    const fs::path en_path = scan / (name + "_en");
+    auto en = read_required(en_path, "");
+    if (!en) return en.error();
+    if (*en != "0" && *en != "1")
+        return core::make_error(en_path.string() + ": expected 0 or 1, found '" + *en + "'");
+    if (*en == "0") return std::optional<IioChannel>();
 
-        const fs::path index_path = scan / (name + "_index");
-        auto index_text = read_required(index_path, " (every scan element has an index)");
-        if (!index_text) return index_text.error();
-        auto index = parse_int(index_path, *index_text);
-        if (!index) return index.error();
-        if (*index < 0 || *index > 1'000'000)
-            return core::make_error(index_path.string() + ": index " + *index_text +
-                                    " out of range");
-        if (auto [it, fresh] = by_index.emplace(static_cast<int>(*index), name); !fresh)
-            return core::make_error(index_path.string() + ": index " + *index_text +
-                                    " is also the index of " + it->second);
+    const fs::path index_path = scan / (name + "_index");
+    auto index_text = read_required(index_path, " (every scan element has an index)");
+    if (!index_text) return index_text.error();
+    auto index = parse_int(index_path, *index_text);
+    if (!index) return index.error();
+    if (*index < 0 || *index > 1'000'000)
+        return core::make_error(index_path.string() + ": index " + *index_text + " out of range");
+    if (auto [it, fresh] = by_index.emplace(static_cast<int>(*index), name); !fresh)
+        return core::make_error(index_path.string() + ": index " + *index_text +
+                                " is also the index of " + it->second);
 
-        const fs::path type_path = scan / (name + "_type");
-        auto type_text = read_required(type_path, " (every scan element has a type)");
-        if (!type_text) return type_text.error();
-        auto type = parse_iio_scan_type(*type_text);
-        if (!type) return core::make_error(type_path.string() + ": " + type.error().message);
+    const fs::path type_path = scan / (name + "_type");
+    auto type_text = read_required(type_path, " (every scan element has a type)");
+    if (!type_text) return type_text.error();
+    auto type = parse_iio_scan_type(*type_text);
+    if (!type) return core::make_error(type_path.string() + ": " + type.error().message);
 
-        layout.channels.push_back({name, static_cast<int>(*index), *type, 0});
-    }
-    std::sort(layout.channels.begin(), layout.channels.end(),
-              [](const IioChannel& a, const IioChannel& b) { return a.index < b.index; });
+    return std::optional<IioChannel>(IioChannel{name, static_cast<int>(*index), *type, 0});
+}
 
-    // Each element aligned to its own storage size, in index order; the record padded to the
-    // largest storage size (the kernel's iio_compute_scan_bytes, industrialio-buffer.c).
+// Each element aligned to its own storage size, in index order; the record padded to the
+// largest storage size (the kernel's iio_compute_scan_bytes, industrialio-buffer.c).
+void place_channels(IioLayout& layout) {
     std::size_t offset = 0, largest = 1;
     for (auto& ch : layout.channels) {
         const std::size_t bytes = ch.type.storage_bits / 8;
@@ -232,43 +231,54 @@ core::Result<IioLayout> read_iio_layout(const fs::path& dir) {
         largest = std::max(largest, bytes);
     }
     layout.record_bytes = (offset + largest - 1) / largest * largest;
+}
 
-    const auto find = [&](const std::string& name) -> std::optional<std::size_t> {
-        for (std::size_t i = 0; i < layout.channels.size(); ++i)
-            if (layout.channels[i].name == name) return i;
-        return std::nullopt;
-    };
-    for (std::size_t axis = 0; axis < 3; ++axis) {
-        const std::string name = kAccelChannels[axis];
-        const fs::path en_path = scan / (name + "_en");
-        if (!fs::exists(en_path, ec))
-            return core::make_error(en_path.string() + ": missing (the device has no " + name +
-                                    " channel)");
-        const auto pos = find(name);
-        if (!pos)
-            return core::make_error(en_path.string() + ": " + name +
-                                    " is not enabled (0); enable_iio_buffer enables it");
-        const auto& t = layout.channels[*pos].type;
-        if (t.repeat != 1)
-            return core::make_error((scan / (name + "_type")).string() + ": repeat " +
-                                    std::to_string(t.repeat) + ", expected one value per scan");
-        layout.accel[axis] = *pos;
+// The position in layout.channels of the enabled element `name`.
+std::optional<std::size_t> channel_position(const IioLayout& layout, const std::string& name) {
+    for (std::size_t i = 0; i < layout.channels.size(); ++i)
+        if (layout.channels[i].name == name) return i;
+    return std::nullopt;
+}
 
-        auto scale = read_real_any({dir / (name + "_scale"), dir / "in_accel_scale"});
-        if (!scale) return scale.error();
-        if (!*scale)
-            return core::make_error((dir / "in_accel_scale").string() + ": missing (nor is there " +
-                                    name + "_scale): cannot convert to m/s²");
-        if (**scale <= 0.0)
-            return core::make_error((dir / "in_accel_scale").string() +
-                                    ": scale must be positive, found " + std::to_string(**scale));
-        layout.scale_mps2[axis] = **scale;
-        auto off = read_real_any({dir / (name + "_offset"), dir / "in_accel_offset"});
-        if (!off) return off.error();
-        layout.offset_lsb[axis] = off->value_or(0.0);
-    }
+// Accelerometer axis `axis` (x, y, z): enabled, one value per scan, with its scale (its own or
+// the shared in_accel_scale) and offset.
+core::Result<void> read_accel_axis(const fs::path& dir, const fs::path& scan, std::size_t axis,
+                                   IioLayout& layout) {
+    std::error_code ec;
+    const std::string name = kAccelChannels[axis];
+    const fs::path en_path = scan / (name + "_en");
+    if (!fs::exists(en_path, ec))
+        return core::make_error(en_path.string() + ": missing (the device has no " + name +
+                                " channel)");
+    const auto pos = channel_position(layout, name);
+    if (!pos)
+        return core::make_error(en_path.string() + ": " + name +
+                                " is not enabled (0); enable_iio_buffer enables it");
+    const auto& t = layout.channels[*pos].type;
+    if (t.repeat != 1)
+        return core::make_error((scan / (name + "_type")).string() + ": repeat " +
+                                std::to_string(t.repeat) + ", expected one value per scan");
+    layout.accel[axis] = *pos;
 
-    if (const auto ts = find(kTimestampChannel)) {
+    auto scale = read_real_any({dir / (name + "_scale"), dir / "in_accel_scale"});
+    if (!scale) return scale.error();
+    if (!*scale)
+        return core::make_error((dir / "in_accel_scale").string() + ": missing (nor is there " +
+                                name + "_scale): cannot convert to m/s²");
+    if (**scale <= 0.0)
+        return core::make_error((dir / "in_accel_scale").string() +
+                                ": scale must be positive, found " + std::to_string(**scale));
+    layout.scale_mps2[axis] = **scale;
+    auto off = read_real_any({dir / (name + "_offset"), dir / "in_accel_offset"});
+    if (!off) return off.error();
+    layout.offset_lsb[axis] = off->value_or(0.0);
+    return {};
+}
+
+// The samples' times: the timestamp channel when enabled, the sampling frequency when there is
+// one; at least one of the two.
+core::Result<void> read_timing(const fs::path& dir, const fs::path& scan, IioLayout& layout) {
+    if (const auto ts = channel_position(layout, kTimestampChannel)) {
         const auto& t = layout.channels[*ts].type;
         if (t.storage_bits != 64 || t.real_bits != 64 || t.repeat != 1)
             return core::make_error((scan / "in_timestamp_type").string() +
@@ -285,6 +295,35 @@ core::Result<IioLayout> read_iio_layout(const fs::path& dir) {
         return core::make_error((dir / "sampling_frequency").string() +
                                 ": missing, and the timestamp channel is not enabled: there is "
                                 "no way to time the samples");
+    return {};
+}
+
+}  // namespace
+
+core::Result<IioLayout> read_iio_layout(const fs::path& dir) {
+    const fs::path scan = dir / "scan_elements";
+    std::error_code ec;
+    if (!fs::is_directory(scan, ec))
+        return core::make_error(scan.string() +
+                                ": missing (not an IIO device with a buffer, or the wrong "
+                                "sysfs directory)");
+    auto names = list_scan_elements(scan);
+    if (!names) return names.error();
+
+    IioLayout layout;
+    std::map<int, std::string> by_index;
+    for (const auto& name : *names) {
+        auto channel = read_scan_element(scan, name, by_index);
+        if (!channel) return channel.error();
+        if (*channel) layout.channels.push_back(std::move(**channel));
+    }
+    std::sort(layout.channels.begin(), layout.channels.end(),
+              [](const IioChannel& a, const IioChannel& b) { return a.index < b.index; });
+    place_channels(layout);
+
+    for (std::size_t axis = 0; axis < 3; ++axis)
+        if (auto ok = read_accel_axis(dir, scan, axis, layout); !ok) return ok.error();
+    if (auto ok = read_timing(dir, scan, layout); !ok) return ok.error();
     return layout;
 }
 

@@ -8,10 +8,17 @@ namespace hotgauge::acquire {
 
 ScanBuilder::ScanBuilder(ScanConfig config, Triangulation triangulation)
     : config_(std::move(config)), triangulation_(std::move(triangulation)) {
-    face_.name = config_.face;
-    face_.T_world_camera = config_.T_world_camera;
-    face_.scan_direction = config_.scan_direction.normalized();
-    face_.R_camera_accel = config_.R_camera_accel;
+    start_face();
+}
+
+// The face's geometry and what the scan applies (travel scale, clock offset), as its recording
+// says them; no profile yet.
+void ScanBuilder::start_face() {
+    face_ = {};
+    face_.geometry() = config_.face;
+    face_.scan_direction.normalize();
+    face_.clock_offset_ns = config_.clock_offset_ns;
+    face_.geometry_from_calibration = config_.geometry_from_calibration;
 }
 
 void ScanBuilder::refuse(const std::string& why) {
@@ -44,7 +51,7 @@ void ScanBuilder::add_profile(const std::vector<StripePoint>& points, std::size_
     triangulate(triangulation_, profile, face_.profiles_mm, config_.offset_x_px,
                 config_.offset_y_px);
     face_.profile_times_ns.push_back(t_ns);
-    face_.profile_positions_mm.push_back(config_.speed_mm_s *
+    face_.profile_positions_mm.push_back(config_.speed_mm_s * config_.face.travel_scale *
                                          static_cast<double>(t_ns - t_first_ns_) * 1e-9);
     ++stats_.profiles;
 }
@@ -114,11 +121,7 @@ void ScanBuilder::add(const Frame& f) {
 
 core::FaceScan ScanBuilder::take() {
     core::FaceScan out = std::move(face_);
-    face_ = {};
-    face_.name = config_.face;
-    face_.T_world_camera = config_.T_world_camera;
-    face_.scan_direction = config_.scan_direction.normalized();
-    face_.R_camera_accel = config_.R_camera_accel;
+    start_face();
     return out;
 }
 

@@ -218,6 +218,112 @@ int contrast_bound(const SecondPeak& second, const Pixel* group_max_column, std:
     return bound;
 }
 
+// One pass over the image, row by row: the maximum of every group of kGroupRows rows per column
+// (n_groups rows of n maxima; also for the second peak, below).
+template <class Pixel>
+std::vector<Pixel> group_maxima(const Pixel* pixels, std::size_t n, int height,
+                                std::ptrdiff_t stride, int n_groups) {
+    std::vector<Pixel> group_max(static_cast<std::size_t>(n_groups) * n);
+    for (int g = 0; g < n_groups; ++g) {
+        const int first = g * kGroupRows, last = std::min(first + kGroupRows, height) - 1;
+        Pixel* gm = group_max.data() + static_cast<std::size_t>(g) * n;
+        const auto row = [&](int r) { return pixels + std::min(r, last) * stride; };
+        rows_into_group<Pixel, true>(row(first), row(first + 1), row(first + 2), row(first + 3), gm,
+                                     n);
+        for (int r = first + 4; r <= last; r += 4)
+            rows_into_group<Pixel, false>(row(r), row(r + 1), row(r + 2), row(r + 3), gm, n);
+    }
+    return group_max;
+}
+
+template <class Pixel>
+struct ColumnPeaks {
+    std::vector<Pixel> peak;              // per column, its highest pixel
+    std::vector<std::uint16_t> peak_row;  // the first row reaching it
+};
+
+// Per column the maximum and the first group reaching it (a pass over 1/kGroupRows of the
+// image), and in that group the first row reaching it (at most kGroupRows pixels per column;
+// neighbouring columns' peaks share cache lines).
+template <class Pixel>
+ColumnPeaks<Pixel> column_peaks(const Pixel* pixels, std::ptrdiff_t stride,
+                                const std::vector<Pixel>& group_max, std::size_t n, int n_groups) {
+    ColumnPeaks<Pixel> out{std::vector<Pixel>(n, Pixel{0}), std::vector<std::uint16_t>(n, 0)};
+    auto& peak = out.peak;
+    auto& peak_row = out.peak_row;  // the first group reaching the peak, then its row
+    constexpr std::size_t kBlock = 64;
+    for (int g = 0; g < n_groups; ++g) {
+        const Pixel* gm = group_max.data() + static_cast<std::size_t>(g) * n;
+        const auto gg = static_cast<std::uint16_t>(g);
+        std::size_t c = 0;
+        for (; c + kBlock <= n; c += kBlock)
+            peak_group_block<Pixel, kBlock>(gm + c, peak.data() + c, peak_row.data() + c, gg, 0);
+        peak_group_block<Pixel, 0>(gm + c, peak.data() + c, peak_row.data() + c, gg, n - c);
+    }
+    for (std::size_t c = 0; c < n; ++c)
+        peak_row[c] =
+            static_cast<std::uint16_t>(first_row_at(pixels + c, stride, peak_row[c], peak[c]));
+    return out;
+}
+
+// Whether column c (peak at row m) has a second peak whose contrast reaches double_peak_ratio
+// times its peak's. Both peaks' contrast as the mean over their 3 central rows, each against its
+// own flanks: a glow gradient rising along the column is not a peak, a single noisy pixel hardly
+// is, a reflection (a line, several pixels wide) is.
+template <class Pixel>
+bool double_peak(const Pixel* column, std::ptrdiff_t stride, int height, int m,
+                 const Background& background, const GroupCandidates<Pixel>& candidates,
+                 std::size_t c, const std::vector<Pixel>& group_max, std::size_t n,
+                 const StripeConfig& config) {
+    SecondPeak second = second_peak(column, stride, height, candidates, c);
+    if (second.value > 0) {
+        const double threshold =
+            config.double_peak_ratio * peak_contrast(column, stride, height, m, background);
+        // The candidate's rows are read only if its bound can reach the threshold.
+        if (contrast_bound(second, group_max.data() + c, n, height) >= threshold) {
+            if (second.row < 0)
+                second.row = first_row_at(column, stride, second.group, second.value);
+            const int m2 = second.row;
+            const double contrast2 = peak_contrast(
+                column, stride, height, m2, local_background(column, stride, height, m2, config));
+            if (contrast2 >= threshold) return true;
+        }
+    }
+    return false;
+}
+
+// The centre of gravity of (value − background) over the window rows r0 … r1, or with
+// gaussian_refinement the log-parabola's vertex through the peak m and its neighbours.
+template <class Pixel>
+double stripe_centre(const Pixel* column, std::ptrdiff_t stride, int height, int m, int r0, int r1,
+                     const Background& background, double contrast, const StripeConfig& config) {
+    double sum = 0.0, sum_r = 0.0;
+    for (int r = r0; r <= r1; ++r) {
+        const double a = column[r * stride] - background(r);
+        if (a > 0.0) {
+            sum += a;
+            sum_r += a * r;
+        }
+    }
+    double centre = sum_r / sum;  // sum ≥ contrast ≥ min_peak > 0
+    if (config.gaussian_refinement && m > 0 && m < height - 1) {
+        // Log-parabola through the peak and its neighbours: exact for a Gaussian profile,
+        // free of the centre of gravity's pull towards the window's middle.
+        const double a = column[(m - 1) * stride] - background(m - 1);
+        const double b = contrast;
+        const double d = column[(m + 1) * stride] - background(m + 1);
+        if (a > 0.0 && d > 0.0) {
+            const double la = std::log(a), lb = std::log(b), ld = std::log(d);
+            const double curvature = la - 2.0 * lb + ld;
+            if (curvature < 0.0) {
+                const double delta = 0.5 * (la - ld) / curvature;
+                if (std::abs(delta) <= 1.0) centre = m + delta;
+            }
+        }
+    }
+    return centre;
+}
+
 template <class Pixel>
 std::vector<StripePoint> extract(const Pixel* pixels, int width, int height, std::ptrdiff_t stride,
                                  const StripeConfig& config) {
@@ -230,39 +336,10 @@ std::vector<StripePoint> extract(const Pixel* pixels, int width, int height, std
     if (width == 0 || height == 0) return out;
     const auto n = static_cast<std::size_t>(width);
 
-    // One pass over the image, row by row: the maximum of every group of kGroupRows rows per
-    // column (also for the second peak, below). Then per column the maximum and the first group
-    // reaching it (a pass over 1/kGroupRows of the image), and in that group the first row
-    // reaching it (at most kGroupRows pixels per column; neighbouring columns' peaks share
-    // cache lines).
+    // One pass over the image for the group maxima; from them each column's peak and its row.
     const int n_groups = (height + kGroupRows - 1) / kGroupRows;
-    std::vector<Pixel> group_max(static_cast<std::size_t>(n_groups) * n);
-    for (int g = 0; g < n_groups; ++g) {
-        const int first = g * kGroupRows, last = std::min(first + kGroupRows, height) - 1;
-        Pixel* gm = group_max.data() + static_cast<std::size_t>(g) * n;
-        const auto row = [&](int r) { return pixels + std::min(r, last) * stride; };
-        rows_into_group<Pixel, true>(row(first), row(first + 1), row(first + 2), row(first + 3), gm,
-                                     n);
-        for (int r = first + 4; r <= last; r += 4)
-            rows_into_group<Pixel, false>(row(r), row(r + 1), row(r + 2), row(r + 3), gm, n);
-    }
-    std::vector<Pixel> peak(n, Pixel{0});
-    std::vector<std::uint16_t> peak_row(n, 0);  // the first group reaching the peak, then its row
-    {
-        constexpr std::size_t kBlock = 64;
-        for (int g = 0; g < n_groups; ++g) {
-            const Pixel* gm = group_max.data() + static_cast<std::size_t>(g) * n;
-            const auto gg = static_cast<std::uint16_t>(g);
-            std::size_t c = 0;
-            for (; c + kBlock <= n; c += kBlock)
-                peak_group_block<Pixel, kBlock>(gm + c, peak.data() + c, peak_row.data() + c, gg,
-                                                0);
-            peak_group_block<Pixel, 0>(gm + c, peak.data() + c, peak_row.data() + c, gg, n - c);
-        }
-    }
-    for (std::size_t c = 0; c < n; ++c)
-        peak_row[c] =
-            static_cast<std::uint16_t>(first_row_at(pixels + c, stride, peak_row[c], peak[c]));
+    const std::vector<Pixel> group_max = group_maxima(pixels, n, height, stride, n_groups);
+    const auto [peak, peak_row] = column_peaks(pixels, stride, group_max, n, n_groups);
 
     const bool double_peaks = config.double_peak_ratio > 0.0;
     const GroupCandidates<Pixel> candidates =
@@ -293,54 +370,13 @@ std::vector<StripePoint> extract(const Pixel* pixels, int width, int height, std
             point.status = StripeStatus::kDark;
             continue;
         }
-        if (double_peaks) {
-            // Both peaks' contrast as the mean over their 3 central rows, each against its own
-            // flanks: a glow gradient rising along the column is not a peak, a single noisy
-            // pixel hardly is, a reflection (a line, several pixels wide) is.
-            SecondPeak second = second_peak(column, stride, height, candidates, c);
-            if (second.value > 0) {
-                const double threshold =
-                    config.double_peak_ratio * peak_contrast(column, stride, height, m, background);
-                // The candidate's rows are read only if its bound can reach the threshold.
-                if (contrast_bound(second, group_max.data() + c, n, height) >= threshold) {
-                    if (second.row < 0)
-                        second.row = first_row_at(column, stride, second.group, second.value);
-                    const int m2 = second.row;
-                    const double contrast2 =
-                        peak_contrast(column, stride, height, m2,
-                                      local_background(column, stride, height, m2, config));
-                    if (contrast2 >= threshold) {
-                        point.status = StripeStatus::kDoublePeak;
-                        continue;
-                    }
-                }
-            }
+        if (double_peaks && double_peak(column, stride, height, m, background, candidates, c,
+                                        group_max, n, config)) {
+            point.status = StripeStatus::kDoublePeak;
+            continue;
         }
-
-        double sum = 0.0, sum_r = 0.0;
-        for (int r = r0; r <= r1; ++r) {
-            const double a = column[r * stride] - background(r);
-            if (a > 0.0) {
-                sum += a;
-                sum_r += a * r;
-            }
-        }
-        double centre = sum_r / sum;  // sum ≥ contrast ≥ min_peak > 0
-        if (config.gaussian_refinement && m > 0 && m < height - 1) {
-            // Log-parabola through the peak and its neighbours: exact for a Gaussian profile,
-            // free of the centre of gravity's pull towards the window's middle.
-            const double a = column[(m - 1) * stride] - background(m - 1);
-            const double b = contrast;
-            const double d = column[(m + 1) * stride] - background(m + 1);
-            if (a > 0.0 && d > 0.0) {
-                const double la = std::log(a), lb = std::log(b), ld = std::log(d);
-                const double curvature = la - 2.0 * lb + ld;
-                if (curvature < 0.0) {
-                    const double delta = 0.5 * (la - ld) / curvature;
-                    if (std::abs(delta) <= 1.0) centre = m + delta;
-                }
-            }
-        }
+        const double centre =
+            stripe_centre(column, stride, height, m, r0, r1, background, contrast, config);
         point.row = static_cast<float>(centre);
         point.status = StripeStatus::kOk;
     }

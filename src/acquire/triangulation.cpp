@@ -183,6 +183,99 @@ core::Error direct_error(const std::string& what) {
     return core::make_error("direct-beam triangulation: " + what);
 }
 
+core::Error fit_error(const std::string& what) {
+    return core::make_error("calibration fit: " + what);
+}
+
+// The samples' indices grouped by their nearest column; every sample finite and in the field.
+core::Result<std::vector<std::vector<std::size_t>>> samples_by_column(
+    std::span<const CalibrationSample> samples, const CalibrationOptions& options) {
+    const int width = options.width_px;
+    std::vector<std::vector<std::size_t>> by_column(static_cast<std::size_t>(width));
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+        const CalibrationSample& s = samples[i];
+        if (!std::isfinite(s.x_mm) || !(s.z_mm > 0.0) || !in_field(s.u_px, width) ||
+            !in_field(s.v_px, options.height_px))
+            return fit_error("sample " + std::to_string(i) + " (u " + num(s.u_px) + ", v " +
+                             num(s.v_px) + ", x " + num(s.x_mm) + ", z " + num(s.z_mm) +
+                             ") is outside the field or not finite");
+        by_column[static_cast<std::size_t>(std::lround(std::clamp(s.u_px, 0.0, width - 1.0)))]
+            .push_back(i);
+    }
+    return by_column;
+}
+
+// Column c's law z(t) = P(t) / (1 + q·t) from its samples `idx`, into coef (degree + 2 values:
+// P's, then q).
+core::Result<void> fit_column_z(std::span<const CalibrationSample> samples,
+                                const std::vector<std::size_t>& idx, int c, int degree, double mid,
+                                double* coef) {
+    const int stride = degree + 2;
+    std::vector<double> rows;
+    for (std::size_t i : idx) rows.push_back(samples[i].v_px);
+    std::sort(rows.begin(), rows.end());
+    const auto distinct = std::unique(rows.begin(), rows.end()) - rows.begin();
+    if (distinct < stride)
+        return fit_error("column " + std::to_string(c) + " has samples at " +
+                         std::to_string(distinct) + " distinct rows; degree " +
+                         std::to_string(degree) + " needs " + std::to_string(stride));
+    // z·(1 + q·t) = P(t) is linear in (p, q); dividing each equation by the previous
+    // (1 + q·t) makes it a z residual (Sanathanan–Koerner), exact after one pass on clean data.
+    const auto n = static_cast<Eigen::Index>(idx.size());
+    Eigen::MatrixXd a(n, stride);
+    Eigen::VectorXd b(n), weight = Eigen::VectorXd::Ones(n), sol;
+    for (int pass = 0; pass < 3; ++pass) {
+        for (Eigen::Index k = 0; k < n; ++k) {
+            const CalibrationSample& s = samples[idx[static_cast<std::size_t>(k)]];
+            const double t = (s.v_px - mid) / mid;
+            double power = 1.0;
+            for (int j = 0; j <= degree; ++j) {
+                a(k, j) = power * weight[k];
+                power *= t;
+            }
+            a(k, degree + 1) = -t * s.z_mm * weight[k];
+            b[k] = s.z_mm * weight[k];
+        }
+        const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(a);
+        if (qr.rank() < stride)
+            return fit_error("column " + std::to_string(c) +
+                             ": samples do not determine the model (rank " +
+                             std::to_string(qr.rank()) + ")");
+        sol = qr.solve(b);
+        for (Eigen::Index k = 0; k < n; ++k) {
+            const CalibrationSample& s = samples[idx[static_cast<std::size_t>(k)]];
+            const double den = 1.0 + sol[degree + 1] * (s.v_px - mid) / mid;
+            weight[k] = den > 1e-3 ? 1.0 / den : 1.0;
+        }
+    }
+    std::copy(sol.data(), sol.data() + stride, coef);
+    return {};
+}
+
+// The fan: x = k·(u − u0)·z, linear in (k, k·u0) with regressors (u·z, −z). Sets m.x_pitch_mm
+// and m.u0_px; the RMS of x over all samples.
+core::Result<double> fit_fan(std::span<const CalibrationSample> samples, double reference_range_mm,
+                             CalibratedModel& m) {
+    Eigen::MatrixXd ax(static_cast<Eigen::Index>(samples.size()), 2);
+    Eigen::VectorXd bx(ax.rows());
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+        const auto k = static_cast<Eigen::Index>(i);
+        ax(k, 0) = samples[i].u_px * samples[i].z_mm;
+        ax(k, 1) = -samples[i].z_mm;
+        bx[k] = samples[i].x_mm;
+    }
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(ax);
+    const Eigen::Vector2d fan =
+        qr.rank() == 2 ? Eigen::Vector2d(qr.solve(bx)) : Eigen::Vector2d(0, 0);
+    if (!(fan[0] > 0.0))
+        return fit_error(
+            "the samples' x do not determine the laser fan (need samples in several "
+            "columns with x growing with the column)");
+    m.x_pitch_mm = fan[0] * reference_range_mm;
+    m.u0_px = fan[1] / fan[0];
+    return std::sqrt((ax * fan - bx).squaredNorm() / static_cast<double>(samples.size()));
+}
+
 }  // namespace
 
 core::Result<Triangulation> Triangulation::direct_beam(const DirectBeamParams& p) {
@@ -392,31 +485,18 @@ void triangulate(const Triangulation& triangulation, std::span<const StripePoint
 
 core::Result<CalibrationFit> fit_calibrated_model(std::span<const CalibrationSample> samples,
                                                   const CalibrationOptions& options) {
-    const auto fail = [](const std::string& what) {
-        return core::make_error("calibration fit: " + what);
-    };
     if (options.width_px < 1 || options.height_px < 2)
-        return fail("width_px ≥ 1 and height_px ≥ 2 needed");
+        return fit_error("width_px ≥ 1 and height_px ≥ 2 needed");
     if (options.degree < 1 || options.degree > 5)
-        return fail("degree must be in [1, 5], got " + std::to_string(options.degree));
+        return fit_error("degree must be in [1, 5], got " + std::to_string(options.degree));
     if (!(options.reference_range_mm > 0.0))
-        return fail("reference_range_mm must be > 0, got " + num(options.reference_range_mm));
+        return fit_error("reference_range_mm must be > 0, got " + num(options.reference_range_mm));
     if (options.x_degree < 0 || options.x_degree > 5)
-        return fail("x_degree must be in [0, 5], got " + std::to_string(options.x_degree));
+        return fit_error("x_degree must be in [0, 5], got " + std::to_string(options.x_degree));
     const int width = options.width_px, degree = options.degree, stride = degree + 2;
     const double mid = row_mid(options.height_px);
-
-    std::vector<std::vector<std::size_t>> by_column(static_cast<std::size_t>(width));
-    for (std::size_t i = 0; i < samples.size(); ++i) {
-        const CalibrationSample& s = samples[i];
-        if (!std::isfinite(s.x_mm) || !(s.z_mm > 0.0) || !in_field(s.u_px, width) ||
-            !in_field(s.v_px, options.height_px))
-            return fail("sample " + std::to_string(i) + " (u " + num(s.u_px) + ", v " +
-                        num(s.v_px) + ", x " + num(s.x_mm) + ", z " + num(s.z_mm) +
-                        ") is outside the field or not finite");
-        by_column[static_cast<std::size_t>(std::lround(std::clamp(s.u_px, 0.0, width - 1.0)))]
-            .push_back(i);
-    }
+    const auto by_column = samples_by_column(samples, options);
+    if (!by_column) return by_column.error();
 
     CalibrationFit fit;
     CalibratedModel& m = fit.model;
@@ -427,84 +507,29 @@ core::Result<CalibrationFit> fit_calibrated_model(std::span<const CalibrationSam
     m.coefficients.resize(static_cast<std::size_t>(width) * stride);
     double sum_sq = 0.0;
     for (int c = 0; c < width; ++c) {
-        const auto& idx = by_column[static_cast<std::size_t>(c)];
-        std::vector<double> rows;
-        for (std::size_t i : idx) rows.push_back(samples[i].v_px);
-        std::sort(rows.begin(), rows.end());
-        const auto distinct = std::unique(rows.begin(), rows.end()) - rows.begin();
-        if (distinct < stride)
-            return fail("column " + std::to_string(c) + " has samples at " +
-                        std::to_string(distinct) + " distinct rows; degree " +
-                        std::to_string(degree) + " needs " + std::to_string(stride));
-        // z·(1 + q·t) = P(t) is linear in (p, q); dividing each equation by the previous
-        // (1 + q·t) makes it a z residual (Sanathanan–Koerner), exact after one pass on clean data.
-        const auto n = static_cast<Eigen::Index>(idx.size());
-        Eigen::MatrixXd a(n, stride);
-        Eigen::VectorXd b(n), weight = Eigen::VectorXd::Ones(n), sol;
-        for (int pass = 0; pass < 3; ++pass) {
-            for (Eigen::Index k = 0; k < n; ++k) {
-                const CalibrationSample& s = samples[idx[static_cast<std::size_t>(k)]];
-                const double t = (s.v_px - mid) / mid;
-                double power = 1.0;
-                for (int j = 0; j <= degree; ++j) {
-                    a(k, j) = power * weight[k];
-                    power *= t;
-                }
-                a(k, degree + 1) = -t * s.z_mm * weight[k];
-                b[k] = s.z_mm * weight[k];
-            }
-            const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(a);
-            if (qr.rank() < stride)
-                return fail("column " + std::to_string(c) +
-                            ": samples do not determine the "
-                            "model (rank " +
-                            std::to_string(qr.rank()) + ")");
-            sol = qr.solve(b);
-            for (Eigen::Index k = 0; k < n; ++k) {
-                const CalibrationSample& s = samples[idx[static_cast<std::size_t>(k)]];
-                const double den = 1.0 + sol[degree + 1] * (s.v_px - mid) / mid;
-                weight[k] = den > 1e-3 ? 1.0 / den : 1.0;
-            }
-        }
-        std::copy(sol.data(), sol.data() + stride, m.coefficients.data() + c * stride);
+        const auto& idx = (*by_column)[static_cast<std::size_t>(c)];
+        double* coef = m.coefficients.data() + c * stride;
+        if (auto ok = fit_column_z(samples, idx, c, degree, mid, coef); !ok) return ok.error();
         for (std::size_t i : idx) {
             const double r =
-                column_z(m.coefficients.data() + c * stride, degree, (samples[i].v_px - mid) / mid)
-                    .z -
-                samples[i].z_mm;
+                column_z(coef, degree, (samples[i].v_px - mid) / mid).z - samples[i].z_mm;
             sum_sq += r * r;
             fit.max_abs_z_mm = std::max(fit.max_abs_z_mm, std::abs(r));
         }
     }
     fit.rms_z_mm = std::sqrt(sum_sq / static_cast<double>(samples.size()));
 
-    // The fan: x = k·(u − u0)·z, linear in (k, k·u0) with regressors (u·z, −z).
-    Eigen::MatrixXd ax(static_cast<Eigen::Index>(samples.size()), 2);
-    Eigen::VectorXd bx(ax.rows());
-    for (std::size_t i = 0; i < samples.size(); ++i) {
-        const auto k = static_cast<Eigen::Index>(i);
-        ax(k, 0) = samples[i].u_px * samples[i].z_mm;
-        ax(k, 1) = -samples[i].z_mm;
-        bx[k] = samples[i].x_mm;
-    }
-    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(ax);
-    const Eigen::Vector2d fan =
-        qr.rank() == 2 ? Eigen::Vector2d(qr.solve(bx)) : Eigen::Vector2d(0, 0);
-    if (!(fan[0] > 0.0))
-        return fail(
-            "the samples' x do not determine the laser fan (need samples in several "
-            "columns with x growing with the column)");
-    m.x_pitch_mm = fan[0] * options.reference_range_mm;
-    m.u0_px = fan[1] / fan[0];
-    fit.rms_x_mm = std::sqrt((ax * fan - bx).squaredNorm() / static_cast<double>(samples.size()));
+    auto rms_x = fit_fan(samples, options.reference_range_mm, m);
+    if (!rms_x) return rms_x.error();
+    fit.rms_x_mm = *rms_x;
     if (options.x_degree > 0) {
-        auto rms = fit_x_law(samples, by_column, options.x_degree, m);
-        if (!rms) return fail(rms.error().message);
+        auto rms = fit_x_law(samples, *by_column, options.x_degree, m);
+        if (!rms) return fit_error(rms.error().message);
         fit.rms_x_mm = *rms;
     }
 
     auto check = Triangulation::calibrated(m);
-    if (!check) return fail(check.error().message);
+    if (!check) return fit_error(check.error().message);
     return fit;
 }
 
@@ -520,7 +545,7 @@ core::Result<DirectBeamParams> design_direct_beam(const DirectBeamDesign& d) {
     if (!(d.pitch_mm > 0.0)) return fail("pitch_mm must be > 0, got " + num(d.pitch_mm));
     if (!(d.pixel_size_mm > 0.0))
         return fail("pixel_size_mm must be > 0, got " + num(d.pixel_size_mm));
-    if (d.width_px < 1 || d.height_px < 2) return fail("width_px ≥ 1 and height_px ≥ 2 needed");
+    if (d.width < 1 || d.height_px < 2) return fail("width_px ≥ 1 and height_px ≥ 2 needed");
 
     // The lens sits baseline_mm beside the laser and looks at the reference spot.
     const double a0 = std::hypot(d.baseline_mm, d.standoff_mm);
@@ -560,10 +585,10 @@ core::Result<DirectBeamParams> design_direct_beam(const DirectBeamDesign& d) {
     p.beta_deg = im.beta / kDeg;
     p.pixel_size_mm = d.pixel_size_mm;
     p.v0_px = -im.near / d.pixel_size_mm;  // row 0 sees min_range_mm
-    p.u0_px = 0.5 * (d.width_px - 1);      // ray i of the simulator is column i
+    p.u0_px = 0.5 * (d.width - 1);         // ray i of the simulator is column i
     p.x_pitch_mm = d.pitch_mm;
     p.reference_range_mm = d.standoff_mm;
-    p.width_px = d.width_px;
+    p.width_px = d.width;
     p.height_px = d.height_px;
     auto check = Triangulation::direct_beam(p);
     if (!check) return fail(check.error().message);

@@ -13,10 +13,9 @@
 #include "hotgauge/acquire/camera.hpp"
 #include "hotgauge/acquire/scan.hpp"
 #include "hotgauge/acquire/session.hpp"
+#include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/core/clock.hpp"
 #include "hotgauge/io/recording_io.hpp"
-#include "hotgauge/sim/simulator.hpp"
-#include "hotgauge/vcell/render.hpp"
 
 namespace hotgauge::app {
 namespace {
@@ -25,7 +24,8 @@ struct GrabArgs {
     acquire::CameraConfig camera;
     acquire::ScanConfig scan;
     std::vector<std::string> features;  // NAME=VALUE
-    std::string cell = HOTGAUGE_CONFIG_DIR "/cell.yaml";
+    std::string face = "top";
+    std::string calibration = HOTGAUGE_CONFIG_DIR "/calibration.yaml";
     std::string out;
     std::string recipe = "hub-a";
     std::string part_id = "GRAB-000001";
@@ -78,50 +78,125 @@ core::Result<accel::AccelSourceConfig> parse_accel(const std::string& text) {
     return c;
 }
 
-int run(GrabArgs a) {
-    for (const auto& f : a.features) {
+// --feature NAME=VALUE, in order, onto the camera's GenICam features.
+core::Result<void> add_features(const std::vector<std::string>& features,
+                                acquire::CameraConfig& camera) {
+    for (const auto& f : features) {
         const auto eq = f.find('=');
-        if (eq == std::string::npos || eq == 0) {
-            spdlog::error("--feature '{}': expected NAME=VALUE", f);
-            return 2;
-        }
-        a.camera.features.emplace_back(f.substr(0, eq), f.substr(eq + 1));
+        if (eq == std::string::npos || eq == 0)
+            return core::make_error("--feature '" + f + "': expected NAME=VALUE");
+        camera.features.emplace_back(f.substr(0, eq), f.substr(eq + 1));
     }
-    // The face's geometry (camera pose, scan direction, accelerometer axes) from the cell config.
-    auto cell = sim::read_cell_config(a.cell);
-    if (!cell) {
-        spdlog::error("{}", cell.error().message);
-        return 1;
-    }
-    const sim::FaceConfig* face = nullptr;
-    for (const auto& f : cell->faces)
-        if (f.name == a.scan.face) face = &f;
-    if (!face) {
-        spdlog::error("{}: no face '{}'", a.cell, a.scan.face);
-        return 1;
-    }
-    a.scan.T_world_camera = face->T_world_camera;
-    a.scan.scan_direction = face->scan_direction;
-    a.scan.R_camera_accel = face->R_camera_accel;
+    return {};
+}
+
+// The scan settings from the cell's calibration, as the daemon takes them (calib::scan_config:
+// the face's geometry, its travel scale, the clock offset), checked; the triangulation from the
+// same file's sensor model.
+core::Result<acquire::Triangulation> prepare_scan(GrabArgs& a) {
+    auto cal = calib::read_calibration(a.calibration);
+    if (!cal) return cal.error();
+    auto scan = calib::scan_config(*cal, a.face, a.scan);
+    if (!scan) return core::make_error(a.calibration + ": " + scan.error().message);
+    a.scan = std::move(*scan);
     a.scan.peaks.fractional_bits = a.fractional_bits;
     if (a.scan.frame_mode == "peaks") {
-        if (auto ok = acquire::check_peak_format(a.scan.peaks); !ok) {
-            spdlog::error("{}", ok.error().message);
-            return 1;
-        }
+        if (auto ok = acquire::check_peak_format(a.scan.peaks); !ok) return ok.error();
     } else if (auto ok = acquire::check_stripe_config(a.scan.stripe); !ok) {
-        spdlog::error("{}", ok.error().message);
-        return 1;
+        return ok.error();
     }
-    // The cell's sensor as designed (a calibrated model replaces it on a real cell).
-    auto tri = vcell::sensor_triangulation(cell->sensor);
+    auto tri = calib::triangulation(cal->sensor);
+    if (!tri) return core::make_error(a.calibration + ": " + tri.error().message);
+    a.scan.offset_x_px = a.camera.offset_x;
+    // Image rows are the region's; peak values count from the first row of the camera's window.
+    a.scan.offset_y_px = a.scan.frame_mode == "peaks" ? a.peak_row_offset : a.camera.offset_y;
+    return tri;
+}
+
+// The accelerometer source recording into `ring` on its own thread, started.
+core::Result<std::unique_ptr<accel::AccelSource>> start_accel_source(
+    const accel::AccelSourceConfig& config, accel::AccelRing& ring) {
+    auto src = accel::make_accel_source(config, ring);
+    if (!src) return src.error();
+    std::unique_ptr<accel::AccelSource> source = std::move(*src);
+    if (auto ok = source->start(); !ok) return ok.error();
+    return source;
+}
+
+// Positions count from the first frame. A camera's own start latency is measured here at
+// commissioning (camera.start_latency_ms); a scan that lost its start is written, flagged.
+void log_scan_start(const acquire::ScanOutcome& outcome, const GrabArgs& a) {
+    spdlog::info("first frame {:.1f} ms after AcquisitionStart",
+                 static_cast<double>(outcome.start.lag_ns) * 1e-6);
+    if (!outcome.start_lost.empty())
+        spdlog::warn(
+            "the scan may have lost its start ({}): its positions would then be shifted "
+            "along the scan; grab again, or, if this camera always starts this late, "
+            "raise camera.start_latency_ms",
+            outcome.start_lost);
+    if (outcome.exposure_us)
+        spdlog::info("exposure {:.1f} µs for {:.0f} °C (table)", *outcome.exposure_us,
+                     *a.temperature_c);
+}
+
+// Stops the accelerometer once its record covers the scan and its margins (waiting a bounded
+// time for the last datagram), attaches the record to the face, and says how complete it is.
+std::string attach_accel_record(const GrabArgs& a, accel::AccelRing& ring,
+                                accel::AccelSource& source, core::FaceScan& scanned) {
+    const auto margin_ns = static_cast<std::int64_t>(a.accel_margin_s * 1e9);
+    // Samples after the margin's end arrive a datagram or so later: wait, bounded.
+    ring.wait_for(
+        scanned.profile_times_ns.back() + margin_ns,
+        std::chrono::milliseconds(static_cast<long long>(1000 + 2000 * a.accel_margin_s)));
+    source.stop();
+    const accel::AccelWindow w = accel::attach_face_window(ring, scanned, margin_ns);
+    const auto status = source.status();
+    std::string summary = std::to_string(w.samples.size()) + " accelerometer samples (" +
+                          std::to_string(w.gaps.size()) + " gaps, " +
+                          std::to_string(w.missing_samples) + " missing" +
+                          (w.covered() ? "" : ", margins NOT covered") + ")";
+    if (!w.complete())
+        spdlog::warn("accelerometer record incomplete around the scan: {} (source: {})", summary,
+                     status.error.empty() ? "running" : status.error);
+    return summary;
+}
+
+void print_grab_summary(const GrabArgs& a, const core::FaceScan& face, const acquire::ScanStats& st,
+                        const acquire::StreamStats& cs, const std::string& accel_summary) {
+    const auto& times = face.profile_times_ns;
+    std::printf(
+        "grabbed %s: %lld frames (%lld incomplete, %lld timeouts, %lld refused, %lld stale), "
+        "%lld profiles "
+        "over %.3f s; points: %lld ok, %lld no return, %lld dark, %lld saturated, %lld double "
+        "peak; %s -> %s\n",
+        a.face.c_str(), static_cast<long long>(st.frames), static_cast<long long>(cs.incomplete),
+        static_cast<long long>(cs.timeouts), static_cast<long long>(st.refused_frames),
+        static_cast<long long>(cs.stale), static_cast<long long>(st.profiles),
+        static_cast<double>(times.back() - times.front()) * 1e-9, static_cast<long long>(st.ok),
+        static_cast<long long>(st.no_return), static_cast<long long>(st.dark),
+        static_cast<long long>(st.saturated), static_cast<long long>(st.double_peak),
+        accel_summary.c_str(), a.out.c_str());
+    std::printf(
+        "stream: %llu completed, %llu failures, %llu underruns, %llu missing frames, %llu "
+        "missing packets, %llu resend requests, %llu resent packets\n",
+        static_cast<unsigned long long>(cs.completed), static_cast<unsigned long long>(cs.failures),
+        static_cast<unsigned long long>(cs.underruns),
+        static_cast<unsigned long long>(cs.missing_frames),
+        static_cast<unsigned long long>(cs.missing_packets),
+        static_cast<unsigned long long>(cs.resend_requests),
+        static_cast<unsigned long long>(cs.resent_packets));
+}
+
+int run(GrabArgs a) {
+    if (auto ok = add_features(a.features, a.camera); !ok) {
+        spdlog::error("{}", ok.error().message);
+        return 2;
+    }
+    auto tri = prepare_scan(a);
     if (!tri) {
         spdlog::error("{}", tri.error().message);
         return 1;
     }
-    a.scan.offset_x_px = a.camera.offset_x;
-    // Image rows are the region's; peak values count from the first row of the camera's window.
-    a.scan.offset_y_px = a.scan.frame_mode == "peaks" ? a.peak_row_offset : a.camera.offset_y;
 
     // The accelerometer records from before the first profile to after the last (the
     // compensation's margins), on its own thread into the ring.
@@ -140,16 +215,12 @@ int run(GrabArgs a) {
                                .gap_periods = 3.0});
     std::unique_ptr<accel::AccelSource> accel_source;
     if (accel_config) {
-        auto src = accel::make_accel_source(*accel_config, ring);
+        auto src = start_accel_source(*accel_config, ring);
         if (!src) {
             spdlog::error("{}", src.error().message);
             return 1;
         }
         accel_source = std::move(*src);
-        if (auto ok = accel_source->start(); !ok) {
-            spdlog::error("{}", ok.error().message);
-            return 1;
-        }
     }
 
     auto table = parse_exposure_table(a.exposure_table);
@@ -171,73 +242,21 @@ int run(GrabArgs a) {
         spdlog::error("{}", outcome.error().message);
         return 1;
     }
-    // Positions count from the first frame. A camera's own start latency is measured here at
-    // commissioning (camera.start_latency_ms); a scan that lost its start is written, flagged.
-    spdlog::info("first frame {:.1f} ms after AcquisitionStart",
-                 static_cast<double>(outcome->start.lag_ns) * 1e-6);
-    if (!outcome->start_lost.empty())
-        spdlog::warn(
-            "the scan may have lost its start ({}): its positions would then be shifted "
-            "along the scan; grab again, or, if this camera always starts this late, "
-            "raise camera.start_latency_ms",
-            outcome->start_lost);
-    if (outcome->exposure_us)
-        spdlog::info("exposure {:.1f} µs for {:.0f} °C (table)", *outcome->exposure_us,
-                     *a.temperature_c);
-    const auto& st = outcome->scan;
-    const auto& cs = outcome->stream;
+    log_scan_start(*outcome, a);
     core::Recording rec;
     rec.part_id = a.part_id;
     rec.recipe = a.recipe;
     rec.captured_at = core::iso8601_utc(core::realtime_ns());
     rec.temperature_c = a.temperature_c;
     rec.faces.push_back(std::move(outcome->face));
-    auto& scanned = rec.faces[0];
-    std::string accel_summary = "no accelerometer (K = 0)";
-    if (accel_source) {
-        const auto margin_ns = static_cast<std::int64_t>(a.accel_margin_s * 1e9);
-        // Samples after the margin's end arrive a datagram or so later: wait, bounded.
-        ring.wait_for(
-            scanned.profile_times_ns.back() + margin_ns,
-            std::chrono::milliseconds(static_cast<long long>(1000 + 2000 * a.accel_margin_s)));
-        accel_source->stop();
-        const accel::AccelWindow w = accel::attach_face_window(ring, scanned, margin_ns);
-        const auto status = accel_source->status();
-        accel_summary = std::to_string(w.samples.size()) + " accelerometer samples (" +
-                        std::to_string(w.gaps.size()) + " gaps, " +
-                        std::to_string(w.missing_samples) + " missing" +
-                        (w.covered() ? "" : ", margins NOT covered") + ")";
-        if (!w.complete())
-            spdlog::warn("accelerometer record incomplete around the scan: {} (source: {})",
-                         accel_summary, status.error.empty() ? "running" : status.error);
-    }
+    const std::string accel_summary =
+        accel_source ? attach_accel_record(a, ring, *accel_source, rec.faces[0])
+                     : "no accelerometer (K = 0)";
     if (auto ok = io::write_recording(rec, a.out); !ok) {
         spdlog::error("{}", ok.error().message);
         return 1;
     }
-    const auto& times = rec.faces[0].profile_times_ns;
-    std::printf(
-        "grabbed %s: %lld frames (%lld incomplete, %lld timeouts, %lld refused, %lld stale), "
-        "%lld profiles "
-        "over %.3f s; points: %lld ok, %lld no return, %lld dark, %lld saturated, %lld double "
-        "peak; %s -> %s\n",
-        a.scan.face.c_str(), static_cast<long long>(st.frames),
-        static_cast<long long>(cs.incomplete), static_cast<long long>(cs.timeouts),
-        static_cast<long long>(st.refused_frames), static_cast<long long>(cs.stale),
-        static_cast<long long>(st.profiles),
-        static_cast<double>(times.back() - times.front()) * 1e-9, static_cast<long long>(st.ok),
-        static_cast<long long>(st.no_return), static_cast<long long>(st.dark),
-        static_cast<long long>(st.saturated), static_cast<long long>(st.double_peak),
-        accel_summary.c_str(), a.out.c_str());
-    std::printf(
-        "stream: %llu completed, %llu failures, %llu underruns, %llu missing frames, %llu "
-        "missing packets, %llu resend requests, %llu resent packets\n",
-        static_cast<unsigned long long>(cs.completed), static_cast<unsigned long long>(cs.failures),
-        static_cast<unsigned long long>(cs.underruns),
-        static_cast<unsigned long long>(cs.missing_frames),
-        static_cast<unsigned long long>(cs.missing_packets),
-        static_cast<unsigned long long>(cs.resend_requests),
-        static_cast<unsigned long long>(cs.resent_packets));
+    print_grab_summary(a, rec.faces[0], outcome->scan, outcome->stream, accel_summary);
     return 0;
 }
 
@@ -249,9 +268,11 @@ Command add_grab(CLI::App& app) {
     s->add_option("--camera", a->camera.id, "camera id, serial or IP (Aravis)")->required();
     s->add_option("--seconds", a->seconds, "scan duration")->capture_default_str();
     s->add_option("--out", a->out, "recording folder to write")->required();
-    s->add_option("--face", a->scan.face, "face name (geometry from the cell config)")
+    s->add_option("--face", a->face, "face name (geometry from the calibration)")
         ->capture_default_str();
-    s->add_option("--cell", a->cell, "cell config with the face geometry")->capture_default_str();
+    s->add_option("--calibration", a->calibration,
+                  "the cell's calibration: face geometry, clock offset, sensor model")
+        ->capture_default_str();
     s->add_option("--mode", a->scan.frame_mode, "frame mode")
         ->check(CLI::IsMember({"image", "peaks"}))
         ->capture_default_str();

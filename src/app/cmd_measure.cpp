@@ -7,11 +7,11 @@
 #include "commands.hpp"
 #include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/core/geometry.hpp"
-#include "hotgauge/io/model_io.hpp"
 #include "hotgauge/io/ply.hpp"
 #include "hotgauge/io/pose_io.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/io/recording_io.hpp"
+#include "hotgauge/model/model_io.hpp"
 #include "hotgauge/pipeline/pipeline.hpp"
 
 namespace hotgauge::app {

@@ -12,9 +12,9 @@
 #include <system_error>
 
 #include "commands.hpp"
-#include "hotgauge/io/model_io.hpp"
 #include "hotgauge/io/recipe.hpp"
 #include "hotgauge/match/model.hpp"
+#include "hotgauge/model/model_io.hpp"
 #include "hotgauge/pipeline/pipeline.hpp"
 
 namespace hotgauge::app {
@@ -42,7 +42,7 @@ int run_build(const ModelArgs& a) {
         spdlog::error("{}", model.error().message);
         return 1;
     }
-    if (auto w = io::write_model(*model, a.out); !w) {
+    if (auto w = model::write_model(*model, a.out); !w) {
         spdlog::error("{}", w.error().message);
         return 1;
     }
@@ -57,7 +57,7 @@ int run_build(const ModelArgs& a) {
 }
 
 int run_info(const ModelArgs& a) {
-    auto model = io::read_model(a.file);
+    auto model = model::read_model(a.file);
     if (!model) {
         spdlog::error("{}", model.error().message);
         return 1;
@@ -66,7 +66,7 @@ int run_info(const ModelArgs& a) {
     std::error_code ec;
     const auto bytes = std::filesystem::file_size(a.file, ec);
     std::cout << "file            " << a.file << " (" << (ec ? 0 : bytes) << " bytes)\n"
-              << "format version  " << io::kModelFormatVersion << '\n'
+              << "format version  " << model::kModelFormatVersion << '\n'
               << "name            " << m.name << '\n'
               << "source          " << m.source << '\n'
               << "axisymmetric    " << (m.axisymmetric ? "yes" : "no") << '\n'

@@ -42,6 +42,86 @@ Stats stats(const std::vector<double>& v, double truth) {
     return s;
 }
 
+// Scan i of the table: the same part, lying in the same place, scanned under other blows.
+sim::SimOptions scan_options(const Table1Args& a, const core::FeatureSpec& spec, int i) {
+    sim::SimOptions o;
+    o.seed = a.seed;  // the same part, lying in the same place ...
+    o.scan_seed = 1000 + static_cast<std::uint64_t>(i);  // ... scanned under other blows
+    o.temperature_c = a.temperature_c;
+    o.faces = spec.faces;
+    o.part_id = "TABLE1-" + std::to_string(i + 1);
+    return o;
+}
+
+// One scan's feature (cold equivalent, mm) measured both ways: index 1 compensated, 0 not; NaN
+// where not measured, with the measurement's reason.
+struct ScanColumns {
+    double cold_mm[2] = {NAN, NAN};
+    std::string reason[2];
+};
+
+// The pose is found in the compensated scans; the uncompensated column reuses it, so that the
+// two columns differ by compensation only.
+ScanColumns measure_both(const core::Recording& recording, const core::Recipe& recipe,
+                         const std::string& feature) {
+    ScanColumns out;
+    pipeline::PipelineOptions p;
+    for (int comp : {1, 0}) {
+        p.compensate = comp == 1;
+        // Uncompensated is measured as a plain fit would (the paper's "before" column): the
+        // plausibility guards that refuse a distorted edge are off for it, so that the
+        // column shows the numbers vibration produces rather than refusals.
+        p.measure = measure::MeasureConfig{};
+        if (!p.compensate) {
+            p.measure.free_centre_min_arc_deg = 0.0;
+            p.measure.max_axis_offset_mm = 1e9;
+            p.measure.max_plane_tilt_deg = 90.0;
+        }
+        const auto r = pipeline::run(recording, recipe, p);
+        if (r.match && r.match->found) {
+            p.T_world_part = r.match->T_world_part;
+            p.pose_source = "match (compensated scans)";
+        }
+        for (const auto& f : r.measurement.features)
+            if (f.name == feature) {
+                if (f.cold_mm) out.cold_mm[comp] = *f.cold_mm;
+                out.reason[comp] = f.reason;
+            }
+    }
+    return out;
+}
+
+// The table's last lines (or the JSON object): each column's sd and largest error against the
+// true cold value, and the paper's figures.
+void print_summary(const Table1Args& a, const core::FeatureSpec& spec,
+                   const std::vector<double>& before, const std::vector<double>& after,
+                   double truth_cold, const nlohmann::json& rows) {
+    const Stats b = before.empty() ? Stats{NAN, NAN, NAN} : stats(before, truth_cold);
+    const Stats c = stats(after, truth_cold);
+    const auto not_measured = static_cast<int>(after.size() - before.size());
+    if (a.json) {
+        nlohmann::json j{
+            {"feature", a.feature},
+            {"nominal_mm", spec.nominal_mm},
+            {"truth_cold_mm", truth_cold},
+            {"rows", rows},
+            {"uncompensated",
+             {{"mean_mm", b.mean}, {"sd_mm", b.sd}, {"max_abs_error_mm", b.max_abs_err}}},
+            {"compensated",
+             {{"mean_mm", c.mean}, {"sd_mm", c.sd}, {"max_abs_error_mm", c.max_abs_err}}}};
+        std::printf("%s\n", j.dump().c_str());
+    } else {
+        std::printf("%-5s %16.3f %16.3f\n", "sd", b.sd, c.sd);
+        if (not_measured)
+            std::printf("(%d uncompensated scans not measured, excluded from their sd)\n",
+                        not_measured);
+        std::printf("%-5s %16.3f %16.3f   (true value %.3f mm, nominal %.3f mm)\n", "max|e|",
+                    b.max_abs_err, c.max_abs_err, truth_cold, spec.nominal_mm);
+        std::printf("paper (HALCON, real line): sd 0.52 mm uncompensated, 0.056 mm compensated\n");
+        std::printf("uncompensated: plain fits, hotgauge's plausibility guards off\n");
+    }
+}
+
 int run(const Table1Args& a) {
     auto recipe = io::read_recipe(a.recipe);
     auto cell = sim::read_cell_config(a.cell);
@@ -64,44 +144,14 @@ int run(const Table1Args& a) {
         std::printf("%-5s %16s %16s   (%s, cold equivalent, mm)\n", "scan", "uncompensated",
                     "compensated", a.feature.c_str());
     for (int i = 0; i < a.scans; ++i) {
-        sim::SimOptions o;
-        o.seed = a.seed;  // the same part, lying in the same place ...
-        o.scan_seed = 1000 + static_cast<std::uint64_t>(i);  // ... scanned under other blows
-        o.temperature_c = a.temperature_c;
-        o.faces = spec->faces;
-        o.part_id = "TABLE1-" + std::to_string(i + 1);
-        auto s = sim::simulate(*recipe, *cell, o);
+        auto s = sim::simulate(*recipe, *cell, scan_options(a, *spec, i));
         if (!s) {
             spdlog::error("{}", s.error().message);
             return 1;
         }
-        // The pose is found in the compensated scans; the uncompensated column reuses it, so
-        // that the two columns differ by compensation only.
-        pipeline::PipelineOptions p;
-        double v[2] = {NAN, NAN};
-        std::string why[2];
-        for (int comp : {1, 0}) {
-            p.compensate = comp == 1;
-            // Uncompensated is measured as a plain fit would (the paper's "before" column): the
-            // plausibility guards that refuse a distorted edge are off for it, so that the
-            // column shows the numbers vibration produces rather than refusals.
-            p.measure = measure::MeasureConfig{};
-            if (!p.compensate) {
-                p.measure.free_centre_min_arc_deg = 0.0;
-                p.measure.max_axis_offset_mm = 1e9;
-                p.measure.max_plane_tilt_deg = 90.0;
-            }
-            const auto r = pipeline::run(s->recording, *recipe, p);
-            if (r.match && r.match->found) {
-                p.T_world_part = r.match->T_world_part;
-                p.pose_source = "match (compensated scans)";
-            }
-            for (const auto& f : r.measurement.features)
-                if (f.name == a.feature) {
-                    if (f.cold_mm) v[comp] = *f.cold_mm;
-                    why[comp] = f.reason;
-                }
-        }
+        const ScanColumns m = measure_both(s->recording, *recipe, a.feature);
+        const auto& v = m.cold_mm;
+        const auto& why = m.reason;
         for (std::size_t j = 0; j < s->truth.features.size(); ++j)
             if (s->truth.features[j].name == a.feature) truth_cold = s->truth.features[j].cold_mm;
         // Compensated is the product: it must measure. Uncompensated, a badly shaken scan may
@@ -126,30 +176,7 @@ int run(const Table1Args& a) {
                 std::printf("%-5d %16.3f %16.3f\n", i + 1, v[0], v[1]);
         }
     }
-    const Stats b = before.empty() ? Stats{NAN, NAN, NAN} : stats(before, truth_cold);
-    const Stats c = stats(after, truth_cold);
-    const auto not_measured = static_cast<int>(after.size() - before.size());
-    if (a.json) {
-        nlohmann::json j{
-            {"feature", a.feature},
-            {"nominal_mm", spec->nominal_mm},
-            {"truth_cold_mm", truth_cold},
-            {"rows", rows},
-            {"uncompensated",
-             {{"mean_mm", b.mean}, {"sd_mm", b.sd}, {"max_abs_error_mm", b.max_abs_err}}},
-            {"compensated",
-             {{"mean_mm", c.mean}, {"sd_mm", c.sd}, {"max_abs_error_mm", c.max_abs_err}}}};
-        std::printf("%s\n", j.dump().c_str());
-    } else {
-        std::printf("%-5s %16.3f %16.3f\n", "sd", b.sd, c.sd);
-        if (not_measured)
-            std::printf("(%d uncompensated scans not measured, excluded from their sd)\n",
-                        not_measured);
-        std::printf("%-5s %16.3f %16.3f   (true value %.3f mm, nominal %.3f mm)\n", "max|e|",
-                    b.max_abs_err, c.max_abs_err, truth_cold, spec->nominal_mm);
-        std::printf("paper (HALCON, real line): sd 0.52 mm uncompensated, 0.056 mm compensated\n");
-        std::printf("uncompensated: plain fits, hotgauge's plausibility guards off\n");
-    }
+    print_summary(a, *spec, before, after, truth_cold, rows);
     return 0;
 }
 

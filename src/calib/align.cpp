@@ -175,8 +175,8 @@ double start_error(const std::vector<detail::BallSeen>& balls, const detail::Fac
     return worst;
 }
 
-FaceGeometry geometry_of(const core::FaceScan& f, const detail::FacePose& pose) {
-    FaceGeometry g;
+FaceCalibration geometry_of(const core::FaceScan& f, const detail::FacePose& pose) {
+    FaceCalibration g;
     g.name = f.name;
     g.T_world_camera = Eigen::Isometry3d::Identity();
     g.T_world_camera.linear() = pose.R.toRotationMatrix();
@@ -277,11 +277,11 @@ core::Result<FaceAlignment> align_face(const Artifact& a, const core::FaceScan& 
 }
 
 core::Result<AccelMount> estimate_accel_mount(const core::Recording& rec,
-                                              const std::vector<FaceGeometry>& faces,
+                                              const std::vector<FaceCalibration>& faces,
                                               const AlignLimits& lim) {
     std::vector<Eigen::Vector3d> D, G;  // gravity direction in the camera frame, mean reading
     for (const auto& f : rec.faces) {
-        const FaceGeometry* g = nullptr;
+        const FaceCalibration* g = nullptr;
         for (const auto& c : faces)
             if (c.name == f.name) g = &c;
         if (!g || f.n_accel() < 10)
@@ -373,8 +373,7 @@ Commissioning commission_faces(const Artifact& artifact, const core::Recording& 
     for (const auto& f : rec.faces) {
         FaceOutcome& o = out.faces.emplace_back();
         o.name = f.name;
-        o.recorded = {f.name,         f.T_world_camera, f.scan_direction,
-                      f.travel_scale, f.R_camera_accel, std::nullopt};
+        o.recorded.geometry() = f.geometry();
         auto fa = align_face(artifact, f, lim);
         if (!fa) {
             o.refused = fa.error().message;

@@ -109,11 +109,11 @@ SensorModel read_sensor(const YamlReader& y, const YAML::Node& s) {
     return m;
 }
 
-FaceGeometry read_face(const YamlReader& y, const YAML::Node& f, const std::string& w) {
+FaceCalibration read_face(const YamlReader& y, const YAML::Node& f, const std::string& w) {
     y.expect_map(f, w,
                  {"name", "camera_to_world", "scan_direction", "travel_scale", "accel_to_camera",
                   "recorded_camera_to_world"});
-    FaceGeometry g;
+    FaceCalibration g;
     g.name = y.string(y.require(f, w, "name"), w + ".name");
     g.T_world_camera = y.isometry(y.require(f, w, "camera_to_world"), w + ".camera_to_world");
     const YAML::Node d = y.require(f, w, "scan_direction");
@@ -174,7 +174,7 @@ std::string fmt_sensor(const SensorModel& s) {
 
 }  // namespace
 
-const FaceGeometry* Calibration::face(const std::string& name) const {
+const FaceCalibration* Calibration::face(const std::string& name) const {
     for (const auto& f : faces)
         if (f.name == name) return &f;
     return nullptr;
@@ -211,7 +211,7 @@ core::Result<Calibration> parse_calibration(std::string_view text,
             y.fail(faces, "faces: expected a non-empty list");
         for (std::size_t i = 0; i < faces.size(); ++i) {
             const std::string wf = "faces[" + std::to_string(i) + "]";
-            FaceGeometry g = read_face(y, faces[i], wf);
+            FaceCalibration g = read_face(y, faces[i], wf);
             if (c.face(g.name)) y.fail(faces[i], wf + ".name: duplicate face '" + g.name + "'");
             c.faces.push_back(std::move(g));
         }
@@ -252,7 +252,7 @@ core::Result<void> write_calibration(const Calibration& c, const std::filesystem
 namespace {
 
 // The calibrated pose of a face whose face.yaml says `recorded` (apply_geometry's rule).
-Eigen::Isometry3d pose_for(const FaceGeometry& g, const core::FaceScan& f) {
+Eigen::Isometry3d pose_for(const FaceCalibration& g, const core::FaceScan& f) {
     if (f.geometry_from_calibration || !g.recorded_camera_to_world) return g.T_world_camera;
     return f.T_world_camera * g.recorded_camera_to_world->inverse() * g.T_world_camera;
 }
@@ -266,18 +266,27 @@ core::Result<void> apply_geometry(const Calibration& c, const std::string& calib
             return core::make_error(calibration_file + ": no face '" + f.name +
                                     "' (the recording has it)");
     for (auto& f : recording.faces) {
-        const FaceGeometry& g = *c.face(f.name);
-        f.T_world_camera = pose_for(g, f);
-        f.scan_direction = g.scan_direction;
-        f.R_camera_accel = g.R_camera_accel;
+        const FaceCalibration& g = *c.face(f.name);
+        const Eigen::Isometry3d T_world_camera = pose_for(g, f);
         const double rescale = g.travel_scale / f.travel_scale;
         for (double& p : f.profile_positions_mm) p *= rescale;
         const std::int64_t shift = c.clock_offset_ns - f.clock_offset_ns;
         for (std::int64_t& t : f.profile_times_ns) t += shift;
-        f.travel_scale = g.travel_scale;
+        f.geometry() = g.geometry();
+        f.T_world_camera = T_world_camera;  // a head placed per part keeps its placement
         f.clock_offset_ns = c.clock_offset_ns;
     }
     return {};
+}
+
+core::Result<acquire::ScanConfig> scan_config(const Calibration& c, const std::string& face,
+                                              acquire::ScanConfig scan) {
+    const FaceCalibration* g = c.face(face);
+    if (!g) return core::make_error("no face '" + face + "' in the calibration");
+    scan.face = g->geometry();
+    scan.clock_offset_ns = c.clock_offset_ns;
+    scan.geometry_from_calibration = true;
+    return scan;
 }
 
 core::Result<acquire::Triangulation> triangulation(const SensorModel& s, int height_px) {
@@ -301,12 +310,7 @@ core::Result<acquire::Triangulation> triangulation(const SensorModel& s, int hei
         return acquire::Triangulation::calibrated(fit->model);
     }
     acquire::DirectBeamDesign d;
-    d.standoff_mm = s.standoff_mm;
-    d.pitch_mm = s.pitch_mm;
-    d.min_range_mm = s.min_range_mm;
-    d.max_range_mm = s.max_range_mm;
-    d.baseline_mm = s.baseline_mm;
-    d.width_px = s.width;
+    d.design() = s.design();
     d.height_px = height_px;
     auto params = acquire::design_direct_beam(d);
     if (!params) return params.error();

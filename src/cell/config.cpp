@@ -99,6 +99,70 @@ fs::path existing(const YamlReader& y, const YAML::Node& node, const std::string
     return y.existing(node, what, base / y.string(node, what));
 }
 
+// camera.features: an ordered list of [NAME, VALUE].
+void read_camera_features(const YamlReader& y, const YAML::Node& f, const std::string& w,
+                          acquire::CameraConfig& cam) {
+    if (!f.IsSequence()) y.fail(f, w + ".features: expected a list of [NAME, VALUE]");
+    for (std::size_t i = 0; i < f.size(); ++i) {
+        const auto pair = y.strings(f[i], w + ".features");
+        if (pair.size() != 2) y.fail(f[i], w + ".features: expected [NAME, VALUE]");
+        cam.features.emplace_back(pair[0], pair[1]);
+    }
+}
+
+// camera.peaks: the format of the sensor's peak frames (mode: peaks).
+void read_peaks(const YamlReader& y, const YAML::Node& p, const std::string& w,
+                acquire::ScanConfig& scan) {
+    const std::string pw = w + ".peaks";
+    y.expect_map(p, pw,
+                 {"profiles_per_frame", "fractional_bits", "row_offset", "second_peak", "intensity",
+                  "width", "intensity_max_value"});
+    auto& f = scan.peaks;
+    f.profiles_per_frame =
+        integer_in(y, p, pw, "profiles_per_frame", 1, 65535, f.profiles_per_frame);
+    f.fractional_bits = integer_in(y, p, pw, "fractional_bits", 0, 15, f.fractional_bits);
+    scan.offset_y_px = integer_in(y, p, pw, "row_offset", 0, 65535, 0);
+    if (p["second_peak"]) f.second_peak = y.boolean(p["second_peak"], pw + ".second_peak");
+    if (p["intensity"]) f.intensity = y.boolean(p["intensity"], pw + ".intensity");
+    if (p["width"]) f.peak_width = y.boolean(p["width"], pw + ".width");
+    f.intensity_max_value =
+        integer_in(y, p, pw, "intensity_max_value", 1, 65535, f.intensity_max_value);
+    if (auto ok = acquire::check_peak_format(f); !ok) y.fail(p, pw + ": " + ok.error().message);
+}
+
+// camera.stripe: the stripe extraction's settings (mode: image).
+void read_stripe(const YamlReader& y, const YAML::Node& s, const std::string& w,
+                 acquire::StripeConfig& o) {
+    const std::string sw = w + ".stripe";
+    y.expect_map(
+        s, sw,
+        {"max_value", "saturation_level", "min_peak", "window_half_width", "background_band",
+         "gaussian_refinement", "double_peak_ratio", "double_peak_min_separation_px"});
+    o.max_value = integer_in(y, s, sw, "max_value", 1, 65535, o.max_value);
+    o.saturation_level = integer_in(y, s, sw, "saturation_level", 0, 65535, o.saturation_level);
+    o.min_peak = y.number_or(s, sw, "min_peak", o.min_peak);
+    o.window_half_width = integer_in(y, s, sw, "window_half_width", 1, 64, o.window_half_width);
+    o.background_band = integer_in(y, s, sw, "background_band", 0, 64, o.background_band);
+    if (s["gaussian_refinement"])
+        o.gaussian_refinement = y.boolean(s["gaussian_refinement"], sw + ".gaussian_refinement");
+    o.double_peak_ratio = y.number_or(s, sw, "double_peak_ratio", o.double_peak_ratio);
+    o.double_peak_min_separation_px = integer_in(y, s, sw, "double_peak_min_separation_px", 1, 4096,
+                                                 o.double_peak_min_separation_px);
+    if (auto ok = acquire::check_stripe_config(o); !ok) y.fail(s, sw + ": " + ok.error().message);
+}
+
+// camera.exposure_table: [°C, µs] pairs, checked as acquire::ExposureTable takes them.
+void read_exposure_table(const YamlReader& y, const YAML::Node& t, const std::string& w,
+                         std::vector<std::pair<double, double>>& table) {
+    if (!t.IsSequence()) y.fail(t, w + ".exposure_table: expected a list of [°C, µs]");
+    for (std::size_t i = 0; i < t.size(); ++i) {
+        const auto v = y.numbers(t[i], w + ".exposure_table", 2);
+        table.emplace_back(v[0], v[1]);
+    }
+    if (auto ok = acquire::ExposureTable::create(table); !ok)
+        y.fail(t, w + ".exposure_table: " + ok.error().message);
+}
+
 void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a) {
     const std::string w = "camera";
     y.expect_map(c, w,
@@ -157,14 +221,7 @@ void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a)
     cam.max_timeouts = integer_in(y, c, w, "max_timeouts", 1, 1000, cam.max_timeouts);
     cam.control_wait_ms = integer_in(y, c, w, "control_wait_ms", 0, 60000, cam.control_wait_ms);
     cam.start_latency_ms = integer_in(y, c, w, "start_latency_ms", 0, 10000, cam.start_latency_ms);
-    if (const YAML::Node f = c["features"]) {  // an ordered list of [NAME, VALUE]
-        if (!f.IsSequence()) y.fail(f, w + ".features: expected a list of [NAME, VALUE]");
-        for (std::size_t i = 0; i < f.size(); ++i) {
-            const auto pair = y.strings(f[i], w + ".features");
-            if (pair.size() != 2) y.fail(f[i], w + ".features: expected [NAME, VALUE]");
-            cam.features.emplace_back(pair[0], pair[1]);
-        }
-    }
+    if (const YAML::Node f = c["features"]) read_camera_features(y, f, w, cam);
     a.scan_s = positive(y, c, w, "scan_s", a.scan_s);
     scan.speed_mm_s = positive(y, c, w, "speed_mm_s", scan.speed_mm_s);
     scan.line_period_s = 1.0 / positive(y, c, w, "line_rate_hz", 1.0 / scan.line_period_s);
@@ -172,55 +229,11 @@ void read_camera(const YamlReader& y, const YAML::Node& c, AcquisitionConfig& a)
         y.fail(c["clock_offset_ns"], w + ".clock_offset_ns: the camera → accelerometer clock "
                                          "offset is measured now: clock_offset_ns in the "
                                          "calibration file (docs/calibration.md)");
-    if (const YAML::Node p = c["peaks"]) {
-        const std::string pw = w + ".peaks";
-        y.expect_map(p, pw,
-                     {"profiles_per_frame", "fractional_bits", "row_offset", "second_peak",
-                      "intensity", "width", "intensity_max_value"});
-        auto& f = scan.peaks;
-        f.profiles_per_frame =
-            integer_in(y, p, pw, "profiles_per_frame", 1, 65535, f.profiles_per_frame);
-        f.fractional_bits = integer_in(y, p, pw, "fractional_bits", 0, 15, f.fractional_bits);
-        scan.offset_y_px = integer_in(y, p, pw, "row_offset", 0, 65535, 0);
-        if (p["second_peak"]) f.second_peak = y.boolean(p["second_peak"], pw + ".second_peak");
-        if (p["intensity"]) f.intensity = y.boolean(p["intensity"], pw + ".intensity");
-        if (p["width"]) f.peak_width = y.boolean(p["width"], pw + ".width");
-        f.intensity_max_value =
-            integer_in(y, p, pw, "intensity_max_value", 1, 65535, f.intensity_max_value);
-        if (auto ok = acquire::check_peak_format(f); !ok) y.fail(p, pw + ": " + ok.error().message);
-    }
-    if (const YAML::Node s = c["stripe"]) {
-        const std::string sw = w + ".stripe";
-        y.expect_map(
-            s, sw,
-            {"max_value", "saturation_level", "min_peak", "window_half_width", "background_band",
-             "gaussian_refinement", "double_peak_ratio", "double_peak_min_separation_px"});
-        auto& o = scan.stripe;
-        o.max_value = integer_in(y, s, sw, "max_value", 1, 65535, o.max_value);
-        o.saturation_level = integer_in(y, s, sw, "saturation_level", 0, 65535, o.saturation_level);
-        o.min_peak = y.number_or(s, sw, "min_peak", o.min_peak);
-        o.window_half_width = integer_in(y, s, sw, "window_half_width", 1, 64, o.window_half_width);
-        o.background_band = integer_in(y, s, sw, "background_band", 0, 64, o.background_band);
-        if (s["gaussian_refinement"])
-            o.gaussian_refinement =
-                y.boolean(s["gaussian_refinement"], sw + ".gaussian_refinement");
-        o.double_peak_ratio = y.number_or(s, sw, "double_peak_ratio", o.double_peak_ratio);
-        o.double_peak_min_separation_px = integer_in(y, s, sw, "double_peak_min_separation_px", 1,
-                                                     4096, o.double_peak_min_separation_px);
-        if (auto ok = acquire::check_stripe_config(o); !ok)
-            y.fail(s, sw + ": " + ok.error().message);
-    }
+    if (const YAML::Node p = c["peaks"]) read_peaks(y, p, w, scan);
+    if (const YAML::Node s = c["stripe"]) read_stripe(y, s, w, scan.stripe);
     if (scan.frame_mode == "image") scan.offset_y_px = cam.offset_y;
     scan.offset_x_px = cam.offset_x;
-    if (const YAML::Node t = c["exposure_table"]) {
-        if (!t.IsSequence()) y.fail(t, w + ".exposure_table: expected a list of [°C, µs]");
-        for (std::size_t i = 0; i < t.size(); ++i) {
-            const auto v = y.numbers(t[i], w + ".exposure_table", 2);
-            a.exposure_table.emplace_back(v[0], v[1]);
-        }
-        if (auto ok = acquire::ExposureTable::create(a.exposure_table); !ok)
-            y.fail(t, w + ".exposure_table: " + ok.error().message);
-    }
+    if (const YAML::Node t = c["exposure_table"]) read_exposure_table(y, t, w, a.exposure_table);
 }
 
 void read_endpoint(const YamlReader& y, const YAML::Node& p, const std::string& w,
@@ -294,6 +307,117 @@ plant::MqttConfig read_mqtt(const YamlReader& y, const YAML::Node& m, const fs::
     return c;
 }
 
+// recipes: PLC recipe slot -> recipe file; at least one.
+void read_recipes(const YamlReader& y, const YAML::Node& root, const fs::path& base,
+                  std::map<int, fs::path>& recipes_out) {
+    const YAML::Node recipes = y.require(root, "hotgauged", "recipes");
+    if (!recipes.IsMap() || recipes.size() == 0)
+        y.fail(recipes, "recipes: expected slot: file pairs (slot 1..65535)");
+    for (const auto& kv : recipes) {
+        const auto slot = y.integer(kv.first, "recipes: slot");
+        if (slot < 1 || slot > 65535) y.fail(kv.first, "recipes: slot must be in 1..65535");
+        recipes_out[static_cast<int>(slot)] = existing(y, kv.second, "recipes", base);
+    }
+}
+
+// models: and masters: slot -> file, each slot one that has a recipe; `pairs` names the file in
+// the message ("file", "certificate").
+void read_slot_files(const YamlReader& y, const YAML::Node& m, const std::string& what,
+                     const std::string& pairs, const std::map<int, fs::path>& recipes,
+                     const fs::path& base, std::map<int, fs::path>& out) {
+    if (!m.IsMap()) y.fail(m, what + ": expected slot: " + pairs + " pairs");
+    for (const auto& kv : m) {
+        const auto slot = static_cast<int>(y.integer(kv.first, what + ": slot"));
+        if (!recipes.count(slot))
+            y.fail(kv.first, what + ": slot " + std::to_string(slot) + " has no recipe");
+        out[slot] = existing(y, kv.second, what, base);
+    }
+}
+
+// faces: the scan order; without it all four.
+std::vector<std::string> read_faces(const YamlReader& y, const YAML::Node& root) {
+    std::vector<std::string> faces =
+        root["faces"] ? y.strings(root["faces"], "faces")
+                      : std::vector<std::string>{"top", "bottom", "side1", "side2"};
+    if (faces.empty()) y.fail(root["faces"], "faces: at least one face");
+    if (std::set<std::string>(faces.begin(), faces.end()).size() != faces.size())
+        y.fail(root["faces"], "faces: a face is listed twice");
+    return faces;
+}
+
+void read_accelerometer(const YamlReader& y, const YAML::Node& a, DaemonConfig& c) {
+    const std::string w = "accelerometer";
+    y.expect_map(
+        a, w,
+        {"source", "bind", "sensor_id", "device_dir", "buffer_path", "margin_s", "sample_rate_hz"});
+    const std::string source = y.string(y.require(a, w, "source"), w + ".source");
+    c.accel_margin_s = positive(y, a, w, "margin_s", c.accel_margin_s);
+    c.accel_rate_hz = positive(y, a, w, "sample_rate_hz", c.accel_rate_hz);
+    if (source == "none") return;
+    auto kind = accel::parse_accel_source_kind(source);
+    if (!kind || *kind == accel::AccelSourceKind::recording)
+        y.fail(a["source"], w + ".source: must be udp, iio or none");
+    accel::AccelSourceConfig s;
+    s.kind = *kind;
+    if (a["bind"]) s.udp.bind = y.string(a["bind"], w + ".bind");
+    if (a["sensor_id"])
+        s.udp.sensor_id = static_cast<std::uint16_t>(integer_in(y, a, w, "sensor_id", 0, 65535, 0));
+    if (a["device_dir"]) s.iio.device_dir = y.string(a["device_dir"], w + ".device_dir");
+    if (a["buffer_path"]) s.iio.buffer_path = y.string(a["buffer_path"], w + ".buffer_path");
+    if (auto ok = accel::validate(s); !ok) y.fail(a, w + ": " + ok.error().message);
+    c.accelerometer = s;
+}
+
+// axis: a position for every face the cell scans (`faces`, read before).
+void read_axis(const YamlReader& y, const YAML::Node& x, const std::vector<std::string>& faces,
+               AxisConfig& o) {
+    const std::string w = "axis";
+    y.expect_map(x, w, {"kind", "address", "unit_id", "faces", "timeout_ms"});
+    o.kind = y.string(y.require(x, w, "kind"), w + ".kind");
+    if (o.kind != "none" && o.kind != "modbus")
+        y.fail(x["kind"], w + ".kind: must be modbus or none");
+    if (o.kind != "modbus") return;
+    o.address = y.string(y.require(x, w, "address"), w + ".address");
+    if (!accel::parse_host_port(o.address, w + ".address"))
+        y.fail(x["address"], w + ".address: expected HOST:PORT");
+    o.unit_id = integer_in(y, x, w, "unit_id", 0, 255, o.unit_id);
+    o.timeout_ms = integer_in(y, x, w, "timeout_ms", 100, 600000, o.timeout_ms);
+    const YAML::Node f = y.require(x, w, "faces");
+    if (!f.IsMap()) y.fail(f, w + ".faces: expected face: position pairs");
+    for (const auto& kv : f) {
+        const std::string face = y.string(kv.first, w + ".faces");
+        o.faces[face] = static_cast<int>(y.integer(kv.second, w + ".faces." + face));
+    }
+    for (const auto& face : faces)
+        if (!o.faces.count(face)) y.fail(f, w + ".faces: no position for face '" + face + "'");
+}
+
+// results: the results log, the archive and the quality feed's settings.
+void read_results(const YamlReader& y, const YAML::Node& r, const fs::path& base, DaemonConfig& c) {
+    const std::string w = "results";
+    y.expect_map(r, w,
+                 {"dir", "archive_dir", "archive_quota_gb", "archive_every_nth_ok", "sync",
+                  "drift_baseline", "lot_report", "lot_report_every_s", "min_free_mb"});
+    if (r["dir"]) c.results.dir = base / y.string(r["dir"], w + ".dir");
+    if (r["archive_dir"]) c.archive.dir = base / y.string(r["archive_dir"], w + ".archive_dir");
+    c.archive.quota_bytes = static_cast<std::uint64_t>(positive(y, r, w, "archive_quota_gb", 20.0) *
+                                                       1024.0 * 1024.0 * 1024.0);
+    c.archive.every_nth_ok =
+        integer_in(y, r, w, "archive_every_nth_ok", 0, 1'000'000, c.archive.every_nth_ok);
+    if (r["sync"]) c.results.sync = y.boolean(r["sync"], w + ".sync");
+    if (r["lot_report"]) c.quality.lot_report = y.boolean(r["lot_report"], w + ".lot_report");
+    c.quality.lot_report_every_s = integer_in(y, r, w, "lot_report_every_s", 0, 3600,
+                                              static_cast<int>(c.quality.lot_report_every_s));
+    const int baseline = integer_in(y, r, w, "drift_baseline", 0, 100'000,
+                                    static_cast<int>(c.quality.drift_baseline));
+    if (baseline > 0 && baseline < static_cast<int>(quality::kMinBaseline))
+        y.fail(r["drift_baseline"], w + ".drift_baseline: 0 (no drift watch) or at least " +
+                                        std::to_string(quality::kMinBaseline));
+    c.quality.drift_baseline = static_cast<std::size_t>(baseline);
+    c.results_min_free_mb =
+        integer_in(y, r, w, "min_free_mb", 0, 1'000'000, static_cast<int>(c.results_min_free_mb));
+}
+
 }  // namespace
 
 core::Result<DaemonConfig> parse_daemon_config(std::string_view text, const fs::path& file,
@@ -318,126 +442,22 @@ core::Result<DaemonConfig> parse_daemon_config(std::string_view text, const fs::
             existing(y, y.require(root, "hotgauged", "calibration"), "calibration", base);
         c.calibration_interval_days = integer_in(y, root, "hotgauged", "calibration_interval_days",
                                                  1, 3650, c.calibration_interval_days);
-
-        const YAML::Node recipes = y.require(root, "hotgauged", "recipes");
-        if (!recipes.IsMap() || recipes.size() == 0)
-            y.fail(recipes, "recipes: expected slot: file pairs (slot 1..65535)");
-        for (const auto& kv : recipes) {
-            const auto slot = y.integer(kv.first, "recipes: slot");
-            if (slot < 1 || slot > 65535) y.fail(kv.first, "recipes: slot must be in 1..65535");
-            c.recipes[static_cast<int>(slot)] = existing(y, kv.second, "recipes", base);
-        }
-        if (const YAML::Node m = root["models"]) {
-            if (!m.IsMap()) y.fail(m, "models: expected slot: file pairs");
-            for (const auto& kv : m) {
-                const auto slot = static_cast<int>(y.integer(kv.first, "models: slot"));
-                if (!c.recipes.count(slot))
-                    y.fail(kv.first, "models: slot " + std::to_string(slot) + " has no recipe");
-                c.models[slot] = existing(y, kv.second, "models", base);
-            }
-        }
-        if (const YAML::Node m = root["masters"]) {
-            if (!m.IsMap()) y.fail(m, "masters: expected slot: certificate pairs");
-            for (const auto& kv : m) {
-                const auto slot = static_cast<int>(y.integer(kv.first, "masters: slot"));
-                if (!c.recipes.count(slot))
-                    y.fail(kv.first, "masters: slot " + std::to_string(slot) + " has no recipe");
-                c.masters[slot] = existing(y, kv.second, "masters", base);
-            }
-        }
-        c.faces = root["faces"] ? y.strings(root["faces"], "faces")
-                                : std::vector<std::string>{"top", "bottom", "side1", "side2"};
-        if (c.faces.empty()) y.fail(root["faces"], "faces: at least one face");
-        if (std::set<std::string>(c.faces.begin(), c.faces.end()).size() != c.faces.size())
-            y.fail(root["faces"], "faces: a face is listed twice");
-
+        read_recipes(y, root, base, c.recipes);
+        if (const YAML::Node m = root["models"])
+            read_slot_files(y, m, "models", "file", c.recipes, base, c.models);
+        if (const YAML::Node m = root["masters"])
+            read_slot_files(y, m, "masters", "certificate", c.recipes, base, c.masters);
+        c.faces = read_faces(y, root);
         read_camera(y, y.require(root, "hotgauged", "camera"), c.acquisition);
-
-        if (const YAML::Node a = root["accelerometer"]) {
-            const std::string w = "accelerometer";
-            y.expect_map(a, w,
-                         {"source", "bind", "sensor_id", "device_dir", "buffer_path", "margin_s",
-                          "sample_rate_hz"});
-            const std::string source = y.string(y.require(a, w, "source"), w + ".source");
-            c.accel_margin_s = positive(y, a, w, "margin_s", c.accel_margin_s);
-            c.accel_rate_hz = positive(y, a, w, "sample_rate_hz", c.accel_rate_hz);
-            if (source != "none") {
-                auto kind = accel::parse_accel_source_kind(source);
-                if (!kind || *kind == accel::AccelSourceKind::recording)
-                    y.fail(a["source"], w + ".source: must be udp, iio or none");
-                accel::AccelSourceConfig s;
-                s.kind = *kind;
-                if (a["bind"]) s.udp.bind = y.string(a["bind"], w + ".bind");
-                if (a["sensor_id"])
-                    s.udp.sensor_id =
-                        static_cast<std::uint16_t>(integer_in(y, a, w, "sensor_id", 0, 65535, 0));
-                if (a["device_dir"])
-                    s.iio.device_dir = y.string(a["device_dir"], w + ".device_dir");
-                if (a["buffer_path"])
-                    s.iio.buffer_path = y.string(a["buffer_path"], w + ".buffer_path");
-                if (auto ok = accel::validate(s); !ok) y.fail(a, w + ": " + ok.error().message);
-                c.accelerometer = s;
-            }
-        }
-
-        if (const YAML::Node x = root["axis"]) {
-            const std::string w = "axis";
-            y.expect_map(x, w, {"kind", "address", "unit_id", "faces", "timeout_ms"});
-            auto& o = c.axis;
-            o.kind = y.string(y.require(x, w, "kind"), w + ".kind");
-            if (o.kind != "none" && o.kind != "modbus")
-                y.fail(x["kind"], w + ".kind: must be modbus or none");
-            if (o.kind == "modbus") {
-                o.address = y.string(y.require(x, w, "address"), w + ".address");
-                if (!accel::parse_host_port(o.address, w + ".address"))
-                    y.fail(x["address"], w + ".address: expected HOST:PORT");
-                o.unit_id = integer_in(y, x, w, "unit_id", 0, 255, o.unit_id);
-                o.timeout_ms = integer_in(y, x, w, "timeout_ms", 100, 600000, o.timeout_ms);
-                const YAML::Node f = y.require(x, w, "faces");
-                if (!f.IsMap()) y.fail(f, w + ".faces: expected face: position pairs");
-                for (const auto& kv : f) {
-                    const std::string face = y.string(kv.first, w + ".faces");
-                    o.faces[face] = static_cast<int>(y.integer(kv.second, w + ".faces." + face));
-                }
-                for (const auto& face : c.faces)
-                    if (!o.faces.count(face))
-                        y.fail(f, w + ".faces: no position for face '" + face + "'");
-            }
-        }
-
+        if (const YAML::Node a = root["accelerometer"]) read_accelerometer(y, a, c);
+        if (const YAML::Node x = root["axis"]) read_axis(y, x, c.faces, c.axis);
         if (const YAML::Node p = root["plc"]) read_plc_server(y, p, "plc", c.plc);
         if (const YAML::Node p = root["pyrometer"]) {
             plc::PyrometerConfig py;
             read_pyrometer(y, p, "pyrometer", py);
             c.pyrometer = py;
         }
-        if (const YAML::Node r = root["results"]) {
-            const std::string w = "results";
-            y.expect_map(r, w,
-                         {"dir", "archive_dir", "archive_quota_gb", "archive_every_nth_ok", "sync",
-                          "drift_baseline", "lot_report", "lot_report_every_s", "min_free_mb"});
-            if (r["dir"]) c.results.dir = base / y.string(r["dir"], w + ".dir");
-            if (r["archive_dir"])
-                c.archive.dir = base / y.string(r["archive_dir"], w + ".archive_dir");
-            c.archive.quota_bytes = static_cast<std::uint64_t>(
-                positive(y, r, w, "archive_quota_gb", 20.0) * 1024.0 * 1024.0 * 1024.0);
-            c.archive.every_nth_ok =
-                integer_in(y, r, w, "archive_every_nth_ok", 0, 1'000'000, c.archive.every_nth_ok);
-            if (r["sync"]) c.results.sync = y.boolean(r["sync"], w + ".sync");
-            if (r["lot_report"])
-                c.quality.lot_report = y.boolean(r["lot_report"], w + ".lot_report");
-            c.quality.lot_report_every_s =
-                integer_in(y, r, w, "lot_report_every_s", 0, 3600,
-                           static_cast<int>(c.quality.lot_report_every_s));
-            const int baseline = integer_in(y, r, w, "drift_baseline", 0, 100'000,
-                                            static_cast<int>(c.quality.drift_baseline));
-            if (baseline > 0 && baseline < static_cast<int>(quality::kMinBaseline))
-                y.fail(r["drift_baseline"], w + ".drift_baseline: 0 (no drift watch) or at least " +
-                                                std::to_string(quality::kMinBaseline));
-            c.quality.drift_baseline = static_cast<std::size_t>(baseline);
-            c.results_min_free_mb = integer_in(y, r, w, "min_free_mb", 0, 1'000'000,
-                                               static_cast<int>(c.results_min_free_mb));
-        }
+        if (const YAML::Node r = root["results"]) read_results(y, r, base, c);
         if (const YAML::Node p = root["status_page"])
             read_endpoint(y, p, "status_page", c.status_page);
         if (const YAML::Node p = root["metrics"]) read_endpoint(y, p, "metrics", c.metrics);

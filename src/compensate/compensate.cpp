@@ -34,12 +34,16 @@ struct GridGap {
     std::size_t first, last;
 };
 
+// integrate_twice returns zeros for fewer samples than this: no record to speak of (a guard
+// kept from the first version, d17be8d, not a measured limit).
+constexpr int kMinIntegrableSamples = 8;
+
 }  // namespace
 
 std::vector<double> integrate_twice(const std::vector<double>& accel, double rate_hz,
                                     const CompensationConfig& c) {
     const int n = static_cast<int>(accel.size());
-    if (n < 8 || !(rate_hz > 0)) return std::vector<double>(accel.size(), 0.0);
+    if (n < kMinIntegrableSamples || !(rate_hz > 0)) return std::vector<double>(accel.size(), 0.0);
     // Gravity and bias are constant: the mean goes. Not a linear trend: removing one from the
     // acceleration adds a ramp that integrates to a cubic (measured: 27 % error on a 47 Hz sine).
     std::vector<double> a = accel;
@@ -69,7 +73,8 @@ std::vector<double> integrate_twice(const std::vector<double>& accel, double rat
             continue;
         }
         const double w = 2.0 * std::numbers::pi * f;
-        // (jω)² = −ω²; zero-phase Butterworth magnitude high-pass.
+        // Eq. 6–7 (seed paper §4.1): each line X(k) over (jω_k)² = −ω_k², here also times a
+        // zero-phase Butterworth magnitude high-pass.
         const double hp =
             1.0 / std::sqrt(1.0 + std::pow(c.highpass_hz / std::abs(f), 2.0 * c.highpass_order));
         const double g = -hp / (w * w);
@@ -210,16 +215,21 @@ std::array<std::vector<double>, 3> integrate_across_gaps(
     return u;
 }
 
-}  // namespace
-
-namespace {
+// Only samples this close to the scan count: a record may be longer (or carry a stray far-off
+// timestamp) and must not stretch the integration grid (docs/compensation.md "Per face", 1).
+// compensate_face's warning says "10 s" in its text.
+constexpr double kWindowMarginS = 10.0;
+// Fewer usable samples than this and nothing is compensated: a floor under the median period
+// and the integration, kept from the first version (d17be8d), not a measured limit.
+constexpr std::size_t kMinUsableSamples = 16;
+constexpr double kMmPerM = 1000.0;
 
 // The accelerometer samples near the scan, with what was wrong with the others.
 struct Samples {
     std::vector<double> t;  // s after the face's first profile, on the camera's clock
     std::vector<Eigen::Vector3d> a;
     std::vector<double> non_finite_at, clipped_at;  // left out: their times
-    std::int64_t outside = 0;                       // more than 10 s from the scan
+    std::int64_t outside = 0;                       // more than kWindowMarginS from the scan
 };
 
 // Non-finite and clipped samples are left out (a clipped reading is the range, not the
@@ -227,9 +237,7 @@ struct Samples {
 Samples usable_samples(const core::FaceScan& face, const CompensationConfig& c) {
     Samples out;
     const std::int64_t t_ref = face.profile_times_ns.front();
-    // Only samples near the scan count: a record may be longer (or carry a stray far-off
-    // timestamp); the integration window is the scan plus kWindowMarginS on each side.
-    constexpr double kWindowMarginS = 10.0;
+    // The integration window is the scan plus kWindowMarginS on each side.
     const double scan_end_s = seconds_between(face.profile_times_ns.back(), t_ref);
     for (std::int64_t j = 0; j < face.n_accel(); ++j) {
         const double t = seconds_between(face.accel_times_ns[j], t_ref) - c.clock_offset_s;
@@ -248,6 +256,37 @@ Samples usable_samples(const core::FaceScan& face, const CompensationConfig& c) 
         }
     }
     return out;
+}
+
+// The usable record: its first and last sample (s after the face's first profile)
+// and its nominal period.
+struct RecordSpan {
+    double t0_s, t1_s, period_s;
+};
+
+// Nominal period: the median interval (at least 2 samples).
+double median_period(const Samples& smp) {
+    std::vector<double> dt(smp.t.size() - 1);
+    for (std::size_t j = 0; j + 1 < smp.t.size(); ++j) dt[j] = smp.t[j + 1] - smp.t[j];
+    std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
+    return dt[dt.size() / 2];
+}
+
+// The usable record's span, or why there is none to integrate (then `rec` is not set).
+struct RecordOrWhy {
+    RecordSpan rec{};
+    std::string unusable;
+};
+
+RecordOrWhy record_span(const core::FaceScan& face, const Samples& smp) {
+    if (smp.t.size() < kMinUsableSamples)
+        return {{},
+                face.n_accel() == 0 ? "no accelerometer samples"
+                                    : "too few usable accelerometer samples (" +
+                                          std::to_string(smp.t.size()) + ")"};
+    const RecordSpan rec{smp.t.front(), smp.t.back(), median_period(smp)};
+    if (!(rec.period_s > 0)) return {{}, "accelerometer timestamps not increasing"};
+    return {rec, ""};
 }
 
 // A time span where u cannot be trusted, and why.
@@ -283,6 +322,20 @@ std::vector<Trouble> find_trouble(const Samples& s, double period, const Compens
     return out;
 }
 
+// The trouble as warnings: the number of gaps, of non-finite and of clipped samples.
+std::vector<std::string> trouble_reasons(const Samples& s, const std::vector<Trouble>& trouble) {
+    std::vector<std::string> out;
+    const auto n_gaps =
+        std::count_if(trouble.begin(), trouble.end(), [](const Trouble& b) { return b.t1 > b.t0; });
+    if (n_gaps) out.push_back(std::to_string(n_gaps) + " gap(s) in the accelerometer record");
+    if (!s.non_finite_at.empty())
+        out.push_back(std::to_string(s.non_finite_at.size()) +
+                      " non-finite accelerometer sample(s)");
+    if (!s.clipped_at.empty())
+        out.push_back(std::to_string(s.clipped_at.size()) + " clipped accelerometer sample(s)");
+    return out;
+}
+
 // The world-frame acceleration on a uniform grid from s.t.front(), straight lines over gaps.
 std::array<std::vector<double>, 3> to_grid(const Samples& s, const Eigen::Matrix3d& R_world_accel,
                                            double period) {
@@ -301,12 +354,64 @@ std::array<std::vector<double>, 3> to_grid(const Samples& s, const Eigen::Matrix
     return g;
 }
 
+// The grid points to_grid filled with straight lines where the trouble is (grid from t0 s, `n_grid`
+// points): a gap's points strictly between its usable samples; a lone bad sample's nearest point,
+// unless it is the grid's first or last.
+std::vector<GridGap> grid_gaps(const std::vector<Trouble>& trouble, double t0, double period,
+                               std::size_t n_grid) {
+    std::vector<GridGap> out;
+    for (const Trouble& b : trouble) {
+        if (b.t1 <= b.t0) {  // a lone bad sample: the grid point it left to the straight line
+            const long long i = std::llround((b.t0 - t0) / period);
+            if (i > 0 && i + 1 < static_cast<long long>(n_grid))
+                out.push_back({static_cast<std::size_t>(i), static_cast<std::size_t>(i)});
+            continue;
+        }
+        const auto g0 = static_cast<std::size_t>(std::floor((b.t0 - t0) / period)) + 1;
+        const auto g1 = static_cast<std::size_t>(std::ceil((b.t1 - t0) / period)) - 1;
+        if (b.t1 > b.t0 && g1 >= g0) out.push_back({g0, g1});
+    }
+    return out;
+}
+
+// u at each profile's time (linear interpolation on the grid, m → mm: docs/compensation.md
+// "Per face", 4); a profile outside the record stays uncompensated (0).
+struct ProfileDisplacement {
+    std::vector<Eigen::Vector3d> displacement_mm;
+    double peak_mm = 0.0, rms_mm = 0.0;  // of |u| over the compensated profiles
+    bool applied = false;                // some profile was compensated
+};
+
+ProfileDisplacement displacement_per_profile(const core::FaceScan& face,
+                                             const std::array<std::vector<double>, 3>& u_m,
+                                             const RecordSpan& rec) {
+    ProfileDisplacement out;
+    const std::int64_t np = face.n_profiles();
+    out.displacement_mm.assign(np, Eigen::Vector3d::Zero());
+    const std::size_t n = u_m[0].size();
+    double sum2 = 0.0;
+    std::int64_t n_applied = 0;
+    for (std::int64_t k = 0; k < np; ++k) {
+        const double t = seconds_between(face.profile_times_ns[k], face.profile_times_ns.front());
+        if (t < rec.t0_s || t > rec.t1_s || n < 2) continue;  // no samples: leave uncompensated
+        const double pos = (t - rec.t0_s) / rec.period_s;
+        const auto i0 = std::min<std::size_t>(static_cast<std::size_t>(pos), n - 2);
+        const double f = pos - static_cast<double>(i0);
+        for (int a = 0; a < 3; ++a)
+            out.displacement_mm[k][a] = kMmPerM * (u_m[a][i0] + f * (u_m[a][i0 + 1] - u_m[a][i0]));
+        out.peak_mm = std::max(out.peak_mm, out.displacement_mm[k].norm());
+        sum2 += out.displacement_mm[k].squaredNorm();
+        ++n_applied;
+    }
+    out.applied = n_applied > 0;
+    out.rms_mm = n_applied ? std::sqrt(sum2 / static_cast<double>(n_applied)) : 0.0;
+    return out;
+}
+
 std::string end_cause(const CompensationConfig& c) {
     return "accelerometer record does not cover it with " + fmt_s(c.min_margin_s) + " margins";
 }
 
-// Which profiles the trouble (padded by degrade_pad_s) or the record's ends (min_margin_s)
-// reach, as runs of one cause.
 // A hole longer than max_bridge_s near the scan (within min_margin_s of it; times from the first
 // profile, the scan lasting `scan_s`) cannot be bridged within the compensation's error budget:
 // what the head did in it spoils the displacement far beyond the pad. Its reason, or nothing.
@@ -321,6 +426,8 @@ std::optional<std::string> too_long_to_bridge(const std::vector<Trouble>& troubl
     return std::nullopt;
 }
 
+// Which profiles the trouble (padded by degrade_pad_s) or the record's ends (min_margin_s)
+// reach, as runs of one cause.
 std::vector<core::UntrustedProfiles> untrusted_runs(const core::FaceScan& face,
                                                     const std::vector<Trouble>& trouble,
                                                     double rec_t0, double rec_t1,
@@ -345,96 +452,34 @@ std::vector<core::UntrustedProfiles> untrusted_runs(const core::FaceScan& face,
     return out;
 }
 
-// Nominal period: the median interval (at least 2 samples).
-double median_period(const Samples& smp) {
-    std::vector<double> dt(smp.t.size() - 1);
-    for (std::size_t j = 0; j + 1 < smp.t.size(); ++j) dt[j] = smp.t[j + 1] - smp.t[j];
-    std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
-    return dt[dt.size() / 2];
-}
-
-}  // namespace
-
-FaceCompensation compensate_face(const core::FaceScan& face, const CompensationConfig& c) {
+// Nothing compensated yet: u zero and every profile trusted.
+FaceCompensation uncompensated(const core::FaceScan& face) {
     FaceCompensation out;
     out.face = face.name;
     const std::int64_t np = face.n_profiles();
     out.displacement_mm.assign(np, Eigen::Vector3d::Zero());
     out.profile_degraded.assign(np, 0);
-    auto degrade_all = [&](const std::string& why) {
-        out.degraded = true;
-        out.reasons.push_back(why);
-        std::fill(out.profile_degraded.begin(), out.profile_degraded.end(), 1);
-        out.n_degraded = np;
-        out.untrusted = {
-            {0, np - 1, 0.0,
-             seconds_between(face.profile_times_ns.back(), face.profile_times_ns.front()), why}};
-    };
-    if (np == 0) return out;
+    return out;
+}
 
-    const Samples smp = usable_samples(face, c);
-    if (smp.outside)
-        out.reasons.push_back(std::to_string(smp.outside) +
-                              " accelerometer sample(s) more than 10 s from the scan ignored");
-    if (smp.t.size() < 16) {
-        degrade_all(face.n_accel() == 0 ? "no accelerometer samples"
-                                        : "too few usable accelerometer samples (" +
-                                              std::to_string(smp.t.size()) + ")");
-        return out;
-    }
-    const double period = median_period(smp);
-    if (!(period > 0)) {
-        degrade_all("accelerometer timestamps not increasing");
-        return out;
-    }
-    out.rate_hz = 1.0 / period;
-    const std::vector<Trouble> trouble = find_trouble(smp, period, c);
-    const auto n_gaps =
-        std::count_if(trouble.begin(), trouble.end(), [](const Trouble& b) { return b.t1 > b.t0; });
-    if (n_gaps)
-        out.reasons.push_back(std::to_string(n_gaps) + " gap(s) in the accelerometer record");
-    if (!smp.non_finite_at.empty())
-        out.reasons.push_back(std::to_string(smp.non_finite_at.size()) +
-                              " non-finite accelerometer sample(s)");
-    if (!smp.clipped_at.empty())
-        out.reasons.push_back(std::to_string(smp.clipped_at.size()) +
-                              " clipped accelerometer sample(s)");
+// Every profile untrusted, for one reason.
+void degrade_all(const core::FaceScan& face, const std::string& why, FaceCompensation& out) {
+    const std::int64_t np = face.n_profiles();
+    out.degraded = true;
+    out.reasons.push_back(why);
+    std::fill(out.profile_degraded.begin(), out.profile_degraded.end(), 1);
+    out.n_degraded = np;
+    out.untrusted = {{0, np - 1, 0.0,
+                      seconds_between(face.profile_times_ns.back(), face.profile_times_ns.front()),
+                      why}};
+}
 
-    // Gravity and bias are constant in the world during a scan: integrate_twice removes them
-    // with the mean; m → mm.
-    const double t0 = smp.t.front(), t1 = smp.t.back();
-    const auto grid = to_grid(smp, face.T_world_camera.linear() * face.R_camera_accel, period);
-    std::vector<GridGap> grid_gaps;
-    const auto n_grid = grid[0].size();
-    for (const Trouble& b : trouble) {
-        if (b.t1 <= b.t0) {  // a lone bad sample: the grid point it left to the straight line
-            const long long i = std::llround((b.t0 - t0) / period);
-            if (i > 0 && i + 1 < static_cast<long long>(n_grid))
-                grid_gaps.push_back({static_cast<std::size_t>(i), static_cast<std::size_t>(i)});
-            continue;
-        }
-        const auto g0 = static_cast<std::size_t>(std::floor((b.t0 - t0) / period)) + 1;
-        const auto g1 = static_cast<std::size_t>(std::ceil((b.t1 - t0) / period)) - 1;
-        if (b.t1 > b.t0 && g1 >= g0) grid_gaps.push_back({g0, g1});
-    }
-    const auto u = integrate_across_gaps(grid, out.rate_hz, grid_gaps, c);
-
-    const std::size_t n = u[0].size();
-    double sum2 = 0.0;
-    std::int64_t n_applied = 0;
-    for (std::int64_t k = 0; k < np; ++k) {
-        const double t = seconds_between(face.profile_times_ns[k], face.profile_times_ns.front());
-        if (t < t0 || t > t1 || n < 2) continue;  // no samples at all: leave uncompensated
-        const double pos = (t - t0) / period;
-        const auto i0 = std::min<std::size_t>(static_cast<std::size_t>(pos), n - 2);
-        const double f = pos - static_cast<double>(i0);
-        for (int a = 0; a < 3; ++a)
-            out.displacement_mm[k][a] = 1000.0 * (u[a][i0] + f * (u[a][i0 + 1] - u[a][i0]));
-        out.peak_mm = std::max(out.peak_mm, out.displacement_mm[k].norm());
-        sum2 += out.displacement_mm[k].squaredNorm();
-        ++n_applied;
-    }
-    out.untrusted = untrusted_runs(face, trouble, t0, t1, c);
+// The untrusted runs into the per-profile flags, with the record's ends as a reason once; then
+// the too-long-hole rule (docs/compensation.md "Holes too long to bridge"): such a hole near the
+// scan makes every profile untrusted.
+void mark_untrusted(const core::FaceScan& face, const std::vector<Trouble>& trouble,
+                    const RecordSpan& rec, const CompensationConfig& c, FaceCompensation& out) {
+    out.untrusted = untrusted_runs(face, trouble, rec.t0_s, rec.t1_s, c);
     for (const auto& run : out.untrusted) {
         for (std::int64_t k = run.first; k <= run.last; ++k) out.profile_degraded[k] = 1;
         out.n_degraded += run.last - run.first + 1;
@@ -446,9 +491,44 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
     }
     const double scan_s =
         seconds_between(face.profile_times_ns.back(), face.profile_times_ns.front());
-    if (const auto why = too_long_to_bridge(trouble, scan_s, period, c)) degrade_all(*why);
-    out.applied = n_applied > 0;
-    out.rms_mm = n_applied ? std::sqrt(sum2 / static_cast<double>(n_applied)) : 0.0;
+    if (const auto why = too_long_to_bridge(trouble, scan_s, rec.period_s, c))
+        degrade_all(face, *why, out);
+}
+
+}  // namespace
+
+FaceCompensation compensate_face(const core::FaceScan& face, const CompensationConfig& c) {
+    FaceCompensation out = uncompensated(face);
+    if (face.n_profiles() == 0) return out;
+
+    const Samples smp = usable_samples(face, c);
+    if (smp.outside)  // the text names kWindowMarginS
+        out.reasons.push_back(std::to_string(smp.outside) +
+                              " accelerometer sample(s) more than 10 s from the scan ignored");
+    const auto [rec, unusable] = record_span(face, smp);
+    if (!unusable.empty()) {
+        degrade_all(face, unusable, out);
+        return out;
+    }
+    out.rate_hz = 1.0 / rec.period_s;
+    const std::vector<Trouble> trouble = find_trouble(smp, rec.period_s, c);
+    for (std::string& why : trouble_reasons(smp, trouble)) out.reasons.push_back(std::move(why));
+
+    // The paper's rotation M (§4.1, step 2) on the acceleration rather than on the displacement:
+    // constant during a scan, it commutes with the integration (linear, per axis).
+    const auto grid =
+        to_grid(smp, face.T_world_camera.linear() * face.R_camera_accel, rec.period_s);
+    const auto gaps = grid_gaps(trouble, rec.t0_s, rec.period_s, grid[0].size());
+    // §4.1 step 1, Eq. 5–7 per world axis (integrate_twice), the gaps bridged. Gravity and bias
+    // are constant in the world during a scan: integrate_twice removes them with the mean.
+    const auto u_m = integrate_across_gaps(grid, out.rate_hz, gaps, c);
+
+    ProfileDisplacement d = displacement_per_profile(face, u_m, rec);
+    out.displacement_mm = std::move(d.displacement_mm);
+    out.applied = d.applied;
+    out.peak_mm = d.peak_mm;
+    out.rms_mm = d.rms_mm;
+    mark_untrusted(face, trouble, rec, c, out);
     out.degraded = out.n_degraded > 0;
     if (out.degraded && out.reasons.empty()) out.reasons.push_back("degraded profiles");
     return out;
@@ -458,7 +538,7 @@ CompensationError compensation_error(const core::FaceScan& face, const Compensat
     CompensationError out;
     if (face.n_profiles() == 0) return out;
     const Samples smp = usable_samples(face, c);
-    if (smp.t.size() < 16) return out;
+    if (smp.t.size() < kMinUsableSamples) return out;
     const double period = median_period(smp);
     if (!(period > 0)) return out;
     // The samples as they came, not the grid: interpolating between jittered timestamps damps

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <flann/flann.hpp>
+#include <optional>
 
 #include "internal.hpp"
 
@@ -259,9 +260,10 @@ class Walls {
     }
     // Weak priors: a wall that no point sees keeps its offset and tilt at zero.
     void add_priors(Eigen::MatrixXd& H) const {
+        constexpr double kOffsetPrior = 1.0;     // as weak as one point on the wall
         constexpr double kTiltPriorMm2 = 100.0;  // as weak as one point 10 mm along
         for (int j = 0; j < n_; ++j) {
-            H(first_ + 2 * j, first_ + 2 * j) += 1.0;
+            H(first_ + 2 * j, first_ + 2 * j) += kOffsetPrior;
             H(first_ + 2 * j + 1, first_ + 2 * j + 1) += kTiltPriorMm2;
         }
     }
@@ -297,78 +299,150 @@ double apply_step(const Eigen::VectorXd& x, int n_rot, bool estimate_scale, doub
     return w.norm() * half_size + v.norm() + std::abs(log_scale) * half_size;
 }
 
+// Tuning of the robust Gauss–Newton step (docs/matching.md, "ICP").
+// Fewer gated residuals than this give no trustworthy median: the fit has lost the part.
+constexpr std::size_t kMinGatedResiduals = 12;
+// σ̂ = 1.4826 · MAD: the MAD of normally distributed residuals is 0.6745 σ.
+constexpr float kMadToSigma = 1.4826f;
+// σ̂'s floor: on a near-perfect fit the MAD tends to 0 and the kernel would reject every point.
+constexpr float kMinSigmaMm = 0.01f;
+// Tukey's biweight c = 4.685 σ̂: 95 % efficiency on normally distributed residuals.
+constexpr float kTukeyC = 4.685f;
+// A step needs this many used points per pose unknown; fewer leave it poorly determined.
+constexpr int kMinPointsPerUnknown = 4;
+// Damping relative to H's largest diagonal entry: enough to keep H positive definite, far too
+// small to bias a direction the data fix.
+constexpr double kRelativeDamping = 1e-9;
+// The pose unknowns at most: ω (3), v (3), log scale.
+constexpr int kMaxPoseUnknowns = 7;
+
+// Unknowns: rotation ω and translation v of the part frame (scene side), log scale, and the
+// walls' offsets and tilts (Walls). Axisymmetric: the spin ω_z is unobservable and left out.
+struct Unknowns {
+    int n_rot = 3;   // ω's entries
+    int n_pose = 6;  // ω, v and the log scale when estimated
+    int n_par = 6;   // with the walls'
+    bool estimate_scale = false;
+};
+
+// Each scene point in the part frame, its closest model point, and the |residual| of those
+// within the gate.
+struct Correspondences {
+    std::vector<Eigen::Vector3f> q_part;
+    std::vector<Closest> closest;
+    std::vector<float> gated_abs_mm;
+};
+
+void correspond(const Surface& surface, const Walls& walls, const std::vector<Eigen::Vector3f>& pts,
+                const Eigen::Isometry3d& T_world_part, double scale, float gate,
+                Correspondences& corr) {
+    const Eigen::Isometry3f T_pw = T_world_part.inverse().cast<float>();
+    const auto s = static_cast<float>(scale);
+    corr.gated_abs_mm.clear();
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+        corr.q_part[i] = T_pw * pts[i];
+        corr.closest[i] = surface.closest(corr.q_part[i], s);
+        if (corr.closest[i].distance < gate)
+            corr.gated_abs_mm.push_back(std::abs(walls.residual(corr.closest[i], corr.q_part[i])));
+    }
+}
+
+// Residual scale for the robust kernel: Tukey's c from the MAD of the gated residuals (which it
+// reorders); none when too few lie within the gate.
+std::optional<float> tukey_threshold(std::vector<float>& gated_abs_mm) {
+    if (gated_abs_mm.size() < kMinGatedResiduals) return std::nullopt;
+    std::nth_element(gated_abs_mm.begin(), gated_abs_mm.begin() + gated_abs_mm.size() / 2,
+                     gated_abs_mm.end());
+    const float sigma = std::max(kMinSigmaMm, kMadToSigma * gated_abs_mm[gated_abs_mm.size() / 2]);
+    return kTukeyC * sigma;
+}
+
+// Normal equations H x = −g (H's upper triangle) of the Tukey-weighted point-to-plane residuals.
+struct NormalEquations {
+    Eigen::MatrixXd H;
+    Eigen::VectorXd g;
+    double sw = 0, swe2 = 0;  // Σ w and Σ w e² over the points used
+    std::int64_t used = 0;
+};
+
+// Each point within the gate and the kernel touches the pose block and at most one wall.
+NormalEquations normal_equations(const Correspondences& corr, const Walls& walls,
+                                 const Unknowns& unk, float gate, float c) {
+    NormalEquations ne{Eigen::MatrixXd::Zero(unk.n_par, unk.n_par),
+                       Eigen::VectorXd::Zero(unk.n_par)};
+    Eigen::Matrix<double, kMaxPoseUnknowns, 1> J =
+        Eigen::Matrix<double, kMaxPoseUnknowns, 1>::Zero();
+    for (std::size_t i = 0; i < corr.closest.size(); ++i) {
+        const Closest& cl = corr.closest[i];
+        if (cl.distance >= gate) continue;
+        const Eigen::Vector3f& n = cl.normal;
+        const float e = walls.residual(cl, corr.q_part[i]);
+        if (std::abs(e) >= c) continue;
+        const float u = e / c;
+        const double w = (1.0f - u * u) * (1.0f - u * u);
+        const Eigen::Vector3f qxn = corr.q_part[i].cross(n);
+        for (int a = 0; a < unk.n_rot; ++a) J(a) = qxn(a);
+        for (int a = 0; a < 3; ++a) J(unk.n_rot + a) = n(a);
+        if (unk.estimate_scale) J(unk.n_pose - 1) = -n.dot(cl.point);
+        for (int a = 0; a < unk.n_pose; ++a) {
+            const double wja = w * J(a);
+            for (int b = a; b < unk.n_pose; ++b) ne.H(a, b) += wja * J(b);
+            ne.g(a) += wja * e;
+        }
+        walls.add(cl, J, unk.n_pose, w, e, ne.H, ne.g);
+        ne.sw += w;
+        ne.swe2 += w * e * e;
+        ++ne.used;
+    }
+    return ne;
+}
+
+// The step x: H x = −g with the walls' weak priors and a tiny damping, which keeps a direction
+// the data do not fix (the spin of a symmetric part under a general model) from drifting.
+Eigen::VectorXd solve_step(const Walls& walls, const Unknowns& unk, NormalEquations& ne) {
+    walls.add_priors(ne.H);
+    const double damping = kRelativeDamping * ne.H.diagonal().maxCoeff();
+    for (int a = 0; a < unk.n_par; ++a) ne.H(a, a) += damping;
+    const Eigen::MatrixXd Hs = ne.H.selfadjointView<Eigen::Upper>();
+    return Hs.ldlt().solve(-ne.g);
+}
+
 }  // namespace
 
 IcpResult icp(const Surface& surface, const Model& model, const std::vector<Eigen::Vector3f>& pts,
               Eigen::Isometry3d T_world_part, double scale, const IcpOptions& o) {
     IcpResult res;
-    // Unknowns: rotation ω and translation v of the part frame (scene side), log scale, and the
-    // walls' offsets and tilts (Walls). Axisymmetric: the spin ω_z is unobservable and left out.
     const bool axi = model.axisymmetric;
-    const int n_rot = axi ? 2 : 3;
-    const int n_pose = n_rot + 3 + (o.estimate_scale ? 1 : 0);
-    Walls walls(model, axi && o.free_radii, n_pose);
-    const int n_par = n_pose + walls.unknowns();
-    std::vector<float> resid;
-    std::vector<Closest> cs(pts.size());
-    std::vector<Eigen::Vector3f> qs(pts.size());
+    Unknowns unk;
+    unk.n_rot = axi ? 2 : 3;
+    unk.n_pose = unk.n_rot + 3 + (o.estimate_scale ? 1 : 0);
+    unk.estimate_scale = o.estimate_scale;
+    Walls walls(model, axi && o.free_radii, unk.n_pose);
+    unk.n_par = unk.n_pose + walls.unknowns();
+    Correspondences corr;
+    corr.q_part.resize(pts.size());
+    corr.closest.resize(pts.size());
     int it = 0;
+    // Stages of narrowing correspondence gates; in each, Gauss–Newton steps until the part stops
+    // moving.
     for (std::size_t stage = 0; stage < o.gates_mm.size(); ++stage) {
         const float gate = static_cast<float>(o.gates_mm[stage]);
         for (int k = 0; k < o.iterations_per_stage && it < o.max_iterations; ++k, ++it) {
-            const Eigen::Isometry3f T_pw = T_world_part.inverse().cast<float>();
-            const auto s = static_cast<float>(scale);
-            // Residual scale for the robust kernel: MAD of the gated residuals.
-            resid.clear();
-            for (std::size_t i = 0; i < pts.size(); ++i) {
-                qs[i] = T_pw * pts[i];
-                cs[i] = surface.closest(qs[i], s);
-                if (cs[i].distance < gate) resid.push_back(std::abs(walls.residual(cs[i], qs[i])));
-            }
-            if (resid.size() < 12) break;
-            std::nth_element(resid.begin(), resid.begin() + resid.size() / 2, resid.end());
-            const float sigma = std::max(0.01f, 1.4826f * resid[resid.size() / 2]);
-            const float c = 4.685f * sigma;  // Tukey biweight
-            // Normal equations; each point touches the pose block and at most one wall.
-            Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n_par, n_par);
-            Eigen::VectorXd g = Eigen::VectorXd::Zero(n_par);
-            Eigen::Matrix<double, 6, 1> J = Eigen::Matrix<double, 6, 1>::Zero();
-            double sw = 0, swe2 = 0;
-            std::int64_t used = 0;
-            for (std::size_t i = 0; i < pts.size(); ++i) {
-                if (cs[i].distance >= gate) continue;
-                const Eigen::Vector3f& n = cs[i].normal;
-                const float e = walls.residual(cs[i], qs[i]);
-                if (std::abs(e) >= c) continue;
-                const float u = e / c;
-                const double w = (1.0f - u * u) * (1.0f - u * u);
-                const Eigen::Vector3f qxn = qs[i].cross(n);
-                for (int a = 0; a < n_rot; ++a) J(a) = qxn(a);
-                for (int a = 0; a < 3; ++a) J(n_rot + a) = n(a);
-                if (o.estimate_scale) J(n_pose - 1) = -n.dot(cs[i].point);
-                for (int a = 0; a < n_pose; ++a) {
-                    const double wja = w * J(a);
-                    for (int b = a; b < n_pose; ++b) H(a, b) += wja * J(b);
-                    g(a) += wja * e;
-                }
-                walls.add(cs[i], J, n_pose, w, e, H, g);
-                sw += w;
-                swe2 += w * e * e;
-                ++used;
-            }
-            res.used = used;
-            res.rms_mm = sw > 0 ? std::sqrt(swe2 / sw) : 0;
-            if (used < n_pose * 4) break;
-            // A tiny damping keeps a direction the data do not fix (the spin of a symmetric part
-            // under a general model) from drifting.
-            walls.add_priors(H);
-            const double damping = 1e-9 * H.diagonal().maxCoeff();
-            for (int a = 0; a < n_par; ++a) H(a, a) += damping;
-            const Eigen::MatrixXd Hs = H.selfadjointView<Eigen::Upper>();
-            const Eigen::VectorXd x = Hs.ldlt().solve(-g);
+            // 1. Correspondences: the closest model point of each scene point.
+            correspond(surface, walls, pts, T_world_part, scale, gate, corr);
+            // 2. The robust kernel's width from the gated residuals.
+            const std::optional<float> c = tukey_threshold(corr.gated_abs_mm);
+            if (!c) break;
+            // 3. The weighted normal equations.
+            NormalEquations ne = normal_equations(corr, walls, unk, gate, *c);
+            res.used = ne.used;
+            res.rms_mm = ne.sw > 0 ? std::sqrt(ne.swe2 / ne.sw) : 0;
+            if (ne.used < unk.n_pose * kMinPointsPerUnknown) break;
+            // 4. Solve, and move the part (and the walls).
+            const Eigen::VectorXd x = solve_step(walls, unk, ne);
             if (!x.allFinite()) break;
-            const double motion =
-                apply_step(x, n_rot, o.estimate_scale, surface.half_size(), T_world_part, scale);
+            const double motion = apply_step(x, unk.n_rot, o.estimate_scale, surface.half_size(),
+                                             T_world_part, scale);
             walls.update(x);
             if (motion < o.stop_mm && k > 0) break;
         }

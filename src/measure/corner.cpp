@@ -211,80 +211,113 @@ Normal normal_equations(const std::vector<CornerPoint>& pts, const std::vector<s
     return out;
 }
 
-Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, double side, Vec7 x,
-            const CornerPrior& prior, const Thinning& th, int iterations = 30) {
-    // The draft: weak (the middle of the drawing's range), or held (a wall out of view, its u
-    // the prior's). A far corner's fillet and depth: weak (the drawing's range, the step's
-    // nominal depth ± 0.5 mm); without a far corner both are held at 0.
+// The draft: weak (the middle of the drawing's range), or held (a wall out of view, its u the
+// prior's). A far corner's fillet and depth: weak (the drawing's range, the step's nominal depth
+// ± 0.5 mm); without a far corner both are held at 0.
+using Priors = std::array<Prior1, 3>;
+Priors corner_priors(const CornerPrior& prior) {
     constexpr double kHeld = 1e10, kDepthSigmaMm = 0.5;
+    // The far fillet's range never below 0.1 mm: its sigma divides the prior's weight.
+    constexpr double kMinRhoRangeMm = 0.1;
     const bool far = prior.depth > 0.0;
     const double far_hold = far ? 1.0 : kHeld;
-    const std::array<Prior1, 3> priors{{
+    return {{
         {3, prior.t_mean(), prior.t_sigma(), prior.fix_draft ? kHeld : 1.0, 1.0},
-        {5, far ? 0.5 * prior.rho_max : 0.0, std::max(prior.rho_max, 0.1) / std::sqrt(12.0),
-         far_hold, far_hold},
+        {5, far ? 0.5 * prior.rho_max : 0.0,
+         std::max(prior.rho_max, kMinRhoRangeMm) / std::sqrt(12.0), far_hold, far_hold},
         {6, prior.depth, kDepthSigmaMm, far_hold, far_hold},
     }};
-    // The priors as more residuals: the normal equations and the cost at v with them.
-    double sigma2 = 0;
-    auto with_prior = [&](const Vec7& v, const Normal& m, Mat7& A, Vec7& b) {
-        A = m.A;
-        b = m.b;
-        double c = m.sse;
-        for (const Prior1& p : priors) {
-            const double w = p.hold * sigma2 / (p.sigma * p.sigma), d = v[p.j] - p.mean;
-            A(p.j, p.j) += w;
-            b[p.j] += w * d;
-            c += w * d * d;
-        }
-        return c;
-    };
-    // The samples in use, listed once: a solve passes over them 5-30 times.
+}
+
+// The priors as more residuals, each weighted by the samples' variance sigma2: the normal
+// equations A, b and the cost at v with them, from m (the samples' at v).
+double with_priors(const Priors& priors, double sigma2, const Vec7& v, const Normal& m, Mat7& A,
+                   Vec7& b) {
+    A = m.A;
+    b = m.b;
+    double c = m.sse;
+    for (const Prior1& p : priors) {
+        const double w = p.hold * sigma2 / (p.sigma * p.sigma), d = v[p.j] - p.mean;
+        A(p.j, p.j) += w;
+        b[p.j] += w * d;
+        c += w * d * d;
+    }
+    return c;
+}
+
+// The samples in use, listed once: a solve passes over them 5-30 times.
+std::vector<std::uint32_t> listed(const std::vector<char>& use) {
     std::vector<std::uint32_t> used;
-    used.reserve(pts.size());
-    for (std::size_t q = 0; q < pts.size(); ++q)
+    used.reserve(use.size());
+    for (std::size_t q = 0; q < use.size(); ++q)
         if (use[q]) used.push_back(static_cast<std::uint32_t>(q));
+    return used;
+}
+
+// x + step inside the model's range: a draft only opens the corner (t ≥ 0), the fillets between
+// 0 and twice the drawing's largest + 0.5 mm, a far corner at least 0.05 mm deep.
+Vec7 step_within(const Vec7& x, const Vec7& step, const CornerPrior& prior) {
+    constexpr double kRhoSlackMm = 0.5, kMinDepthMm = 0.05;
+    Vec7 xn = x + step;
+    xn[3] = std::max(0.0, xn[3]);
+    xn[4] = std::clamp(xn[4], 0.0, 2.0 * prior.rho_max + kRhoSlackMm);
+    xn[5] = std::clamp(xn[5], 0.0, 2.0 * prior.rho_max + kRhoSlackMm);
+    if (prior.depth > 0.0) xn[6] = std::max(xn[6], kMinDepthMm);
+    return xn;
+}
+
+// The normal matrix at the solution with the priors in it: where the samples do not fix the
+// draft (a wall out of view), its covariance is the prior's, and u says what that costs.
+Mat7 normal_for_u(const Normal& raw, const Priors& priors, double rms2, double min_sigma2) {
+    Mat7 A = raw.A;
+    for (const Prior1& p : priors)
+        A(p.j, p.j) += p.hold_u * std::max(rms2, min_sigma2) / (p.sigma * p.sigma);
+    return A;
+}
+
+Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, double side, Vec7 x,
+            const CornerPrior& prior, const Thinning& th, int iterations = 30) {
+    // Levenberg–Marquardt's damping: its start, its factors on an accepted and a rejected step,
+    // its floor, and the ceiling beyond which no step lowers the cost; the damping's floor on a
+    // diagonal the samples leave empty.
+    constexpr double kLambdaStart = 1e-3, kLambdaDown = 0.3, kLambdaUp = 10.0;
+    constexpr double kLambdaMin = 1e-9, kLambdaMax = 1e8, kDampFloor = 1e-9;
+    // A nanometre, or a cost that no longer moves: converged (the results then agree to 0.001 µm
+    // with a 100× tighter tolerance).
+    constexpr double kStepTolMm = 1e-6, kCostTolRel = 1e-9;
+    constexpr double kMinSigma2 = 1e-6;  // mm²: the priors' weight against a (near) exact fit
+    const Priors priors = corner_priors(prior);
+    const std::vector<std::uint32_t> used = listed(use);
     Normal raw = normal_equations(pts, used, side, x, th);  // at x, without the priors
     const double n = std::max(raw.n, 1.0);
-    sigma2 = std::max(raw.sse / n, 1e-6);
+    const double sigma2 = std::max(raw.sse / n, kMinSigma2);
     Mat7 A;
     Vec7 b;
-    double c0 = with_prior(x, raw, A, b), lambda = 1e-3;
+    double c0 = with_priors(priors, sigma2, x, raw, A, b), lambda = kLambdaStart;
     for (int it = 0; it < iterations; ++it) {
         Mat7 M = A;
-        M.diagonal() += lambda * (A.diagonal().array() + 1e-9).matrix();
+        M.diagonal() += lambda * (A.diagonal().array() + kDampFloor).matrix();
         const Vec7 step = -M.ldlt().solve(b);
-        Vec7 xn = x + step;
-        xn[3] = std::max(0.0, xn[3]);
-        xn[4] = std::clamp(xn[4], 0.0, 2.0 * prior.rho_max + 0.5);
-        xn[5] = std::clamp(xn[5], 0.0, 2.0 * prior.rho_max + 0.5);
-        if (far) xn[6] = std::max(xn[6], 0.05);
+        const Vec7 xn = step_within(x, step, prior);
         const Normal next = normal_equations(pts, used, side, xn, th);
         Mat7 An;
         Vec7 bn;
-        const double c1 = with_prior(xn, next, An, bn);
+        const double c1 = with_priors(priors, sigma2, xn, next, An, bn);
         if (c1 < c0) {
-            // A nanometre, or a cost that no longer moves: converged (the results then agree
-            // to 0.001 µm with a 100× tighter tolerance).
-            const bool done = c0 - c1 < 1e-9 * c0 || step.norm() < 1e-6;
+            const bool done = c0 - c1 < kCostTolRel * c0 || step.norm() < kStepTolMm;
             x = xn, A = An, b = bn, c0 = c1, raw = next;
-            lambda = std::max(lambda * 0.3, 1e-9);
+            lambda = std::max(lambda * kLambdaDown, kLambdaMin);
             if (done) break;
         } else {
             // A step that raises the cost by no more than the tolerance: x is the minimum to
             // within it, as when a step lowers it by no more (more steps only raise lambda).
-            if (c1 - c0 < 1e-9 * c0) break;
-            lambda *= 10.0;
-            if (lambda > 1e8) break;
+            if (c1 - c0 < kCostTolRel * c0) break;
+            lambda *= kLambdaUp;
+            if (lambda > kLambdaMax) break;
         }
     }
-    // The normal matrix at the solution with the priors in it: where the samples do not fix the
-    // draft (a wall out of view), its covariance is the prior's, and u says what that costs.
-    A = raw.A;
     const double rms2 = raw.sse / n;
-    for (const Prior1& p : priors)
-        A(p.j, p.j) += p.hold_u * std::max(rms2, 1e-6) / (p.sigma * p.sigma);
-    return {x, A, std::sqrt(rms2)};
+    return {x, normal_for_u(raw, priors, rms2, kMinSigma2), std::sqrt(rms2)};
 }
 
 // The samples of one profile share its vibration residual and pose error, which the formal u

@@ -238,6 +238,77 @@ std::optional<EdgePlane> edge_plane(const Context& ctx, const core::FeatureSpec&
     return ep;
 }
 
+// The faces that see the edge's plane and, on a forging whose recipe adds faces that see the wall
+// broadside (the side scans), those: the wall's draft comes from them, the edge's level from the
+// others.
+struct EdgeFaces {
+    std::vector<const FaceFrame*> plane, wall;
+};
+EdgeFaces edge_faces(const Context& ctx, const core::FeatureSpec& f,
+                     const std::vector<const FaceFrame*>& all) {
+    EdgeFaces out;
+    for (const auto* fr : all)
+        (!ctx.recipe.forging || sees_edge_plane(ctx, f, *fr) ? out.plane : out.wall).push_back(fr);
+    if (out.plane.empty()) out.plane = all;  // none sees it: the reason names them
+    return out;
+}
+
+// The coarse edge (docs/measurement.md, "Edges and circles", step 1): a robust circle through
+// the coarse edge points near the expected radius R_e (± win), with the bracket seeds; or why not.
+std::optional<CircleFit> coarse_circle(const Context& ctx, const core::FeatureSpec& f,
+                                       const std::vector<const FaceFrame*>& frames,
+                                       const EdgePlane& ep, double R_e, double win,
+                                       std::vector<std::vector<std::int64_t>>& seeds,
+                                       std::string& why) {
+    // 3σ rejection, never tighter than 0.1 mm (the fine circle's is 0.02 mm).
+    constexpr RejectOptions kCoarseReject{3.0, 0.1, 10};
+    std::vector<Eigen::Vector2d> coarse;
+    coarse_edge(ctx, f, frames, ep, R_e, win, coarse, seeds);
+    if (static_cast<int>(coarse.size()) < ctx.c.min_edge_points) {
+        why = "edge of '" + f.section + "' at '" + f.edge_at + "': only " +
+              std::to_string(coarse.size()) + " edge points near the expected radius, " +
+              std::to_string(ctx.c.min_edge_points) + " needed (" + profile_span(frames, seeds) +
+              ")";
+        return std::nullopt;
+    }
+    auto fit = fit_circle_robust(coarse, kCoarseReject);
+    if (!fit) {
+        why = "coarse edge circle: " + fit.error().message;
+        return std::nullopt;
+    }
+    return fit->fit;
+}
+
+// The bracket circle's centre in 3D, refused (why) unless it lies on the part axis (the pose put
+// it there) and its radius in the window about R_e: otherwise these are not the edge's points.
+std::optional<Eigen::Vector3d> centre_on_axis(const Context& ctx, const core::FeatureSpec& f,
+                                              const EdgePlane& ep, const BracketCircle& bc,
+                                              double R_e, double win, std::string& why) {
+    const Eigen::Vector3d centre = ep.plane.point + bc.center.x() * ep.e1 + bc.center.y() * ep.e2;
+    const double off_axis = centre.head<2>().norm();
+    if (off_axis > ctx.c.max_axis_offset_mm || std::abs(bc.radius - R_e) > win) {
+        why = "edge circle of '" + f.section + "' is " + std::to_string(off_axis) +
+              " mm off the part axis, radius " + std::to_string(bc.radius) +
+              " mm: wrong pose or wrong part";
+        return std::nullopt;
+    }
+    return centre;
+}
+
+// The diameter's uncertainty budget: the midpoint fit's, the sampling's (the width the brackets
+// agree on), the compensation's (profiles' scatter off the plane and the brackets' drift), and on
+// a partial arc the free fit's disagreement (u_arc, as a radius).
+std::vector<std::pair<std::string, double>> diameter_budget(
+    const std::vector<const FaceFrame*>& frames, const EdgePlane& ep, const FineEdge& fe,
+    const Eigen::Vector2d& centre, double u_sampling, double u_arc) {
+    std::vector<std::pair<std::string, double>> budget = {
+        {"fit", 2.0 * fe.fit.u_radius_mm},
+        {"sampling", 2.0 * u_sampling},
+        {"compensation", std::hypot(ep.profile_scatter, edge_drift_u(frames, ep, fe, centre))}};
+    if (u_arc > 0) budget.push_back({"partial arc", 2.0 * u_arc});
+    return budget;
+}
+
 }  // namespace
 
 bool sees_edge_plane(const Context& ctx, const core::FeatureSpec& f, const FaceFrame& frame) {
@@ -250,36 +321,20 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
                       const std::vector<const FaceFrame*>& all, FeatureResult& r,
                       CornerMemo* memo) {
     const double R = 0.5 * ctx.recipe.section(f.section)->diameter_mm;
-    // A forging's recipe may add faces that see the wall broadside (the side scans): its draft
-    // comes from them; the edge's level from the faces that see its plane.
-    std::vector<const FaceFrame*> frames, wall_frames;
-    for (const auto* fr : all)
-        (!ctx.recipe.forging || sees_edge_plane(ctx, f, *fr) ? frames : wall_frames).push_back(fr);
-    if (frames.empty()) frames = all;  // none sees it: the reason names them
+    const EdgeFaces faces = edge_faces(ctx, f, all);
+    const std::vector<const FaceFrame*>& frames = faces.plane;
     bool plane_inside = false;
     const auto ep = edge_plane(ctx, f, frames, R, plane_inside, r.reason);
     if (!ep) return;
     CornerMemo own;
-    if (ctx.recipe.forging && corner_diameter(ctx, f, frames, wall_frames, *ep,
+    if (ctx.recipe.forging && corner_diameter(ctx, f, frames, faces.wall, *ep,
                                               plane_inside ? 1.0 : -1.0, r, memo ? *memo : own))
         return;
     const double R_e = ctx.ex.z(R), win = ctx.ex.tol(ctx.c.edge_window_mm, R);
-    std::vector<Eigen::Vector2d> coarse;
     std::vector<std::vector<std::int64_t>> seeds;
-    coarse_edge(ctx, f, frames, *ep, R_e, win, coarse, seeds);
-    if (static_cast<int>(coarse.size()) < ctx.c.min_edge_points) {
-        r.reason = "edge of '" + f.section + "' at '" + f.edge_at + "': only " +
-                   std::to_string(coarse.size()) + " edge points near the expected radius, " +
-                   std::to_string(ctx.c.min_edge_points) + " needed (" +
-                   profile_span(frames, seeds) + ")";
-        return;
-    }
-    auto coarse_fit = fit_circle_robust(coarse, {3.0, 0.1, 10});
-    if (!coarse_fit) {
-        r.reason = "coarse edge circle: " + coarse_fit.error().message;
-        return;
-    }
-    const auto fe = fine_edge(ctx, f, frames, *ep, seeds, plane_inside, coarse_fit->fit, r.reason);
+    const auto coarse = coarse_circle(ctx, f, frames, *ep, R_e, win, seeds, r.reason);
+    if (!coarse) return;
+    const auto fe = fine_edge(ctx, f, frames, *ep, seeds, plane_inside, *coarse, r.reason);
     if (!fe) return;
     std::vector<double> sector_d;
     coverage(ctx, *fe, r, sector_d);
@@ -291,17 +346,8 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
     // The midpoint fit is unbiased only where the edge is dithered across the sampling grid; the
     // bracket fit keeps the circle inside every bracket and so removes what is left.
     const BracketCircle bc = fit_circle_brackets(fe->brackets, fe->fit.center, fe->fit.radius);
-    // The circle's centre must lie on the part axis (the pose put it there) and its radius in the
-    // window: otherwise these are not the edge's points.
-    const Eigen::Vector3d centre =
-        ep->plane.point + bc.center.x() * ep->e1 + bc.center.y() * ep->e2;
-    const double off_axis = centre.head<2>().norm();
-    if (off_axis > ctx.c.max_axis_offset_mm || std::abs(bc.radius - R_e) > win) {
-        r.reason = "edge circle of '" + f.section + "' is " + std::to_string(off_axis) +
-                   " mm off the part axis, radius " + std::to_string(bc.radius) +
-                   " mm: wrong pose or wrong part";
-        return;
-    }
+    const auto centre = centre_on_axis(ctx, f, *ep, bc, R_e, win, r.reason);
+    if (!centre) return;
     // Full circle: the radius the brackets agree on about the bracket circle's centre. Partial
     // arc: centre and radius trade off, so about the part axis (partial_arc_radius).
     const IntervalEstimate agreed = agreed_radius(fe->brackets, bc.center);
@@ -310,11 +356,7 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
         !partial_arc_radius(ctx, f, *ep, *fe, bc, r, radius, u_arc))
         return;
     r.hot_mm = 2.0 * radius;
-    r.u_budget = {{"fit", 2.0 * fe->fit.u_radius_mm},
-                  {"sampling", 2.0 * agreed.u},
-                  {"compensation",
-                   std::hypot(ep->profile_scatter, edge_drift_u(frames, *ep, *fe, bc.center))}};
-    if (u_arc > 0) r.u_budget.push_back({"partial arc", 2.0 * u_arc});
+    r.u_budget = diameter_budget(frames, *ep, *fe, bc.center, agreed.u, u_arc);
     r.fit_rms_mm = fe->fit.rms_mm;
     r.n_points = fe->fit.n_points;
     r.method = "edge circle";
@@ -322,7 +364,7 @@ void measure_diameter(const Context& ctx, const core::FeatureSpec& f,
     if (sector_d.size() >= 2) r.sector_spread_mm = sample_std(sector_d);
     add_sector_term(r);
     r.ends.push_back({f.edge_at, "silhouette edge", f.faces, radius, 0.5 * r.u_mm, r.n_points});
-    r.centre_mm = centre;
+    r.centre_mm = *centre;
 }
 
 }  // namespace hotgauge::measure::detail

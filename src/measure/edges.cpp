@@ -131,74 +131,99 @@ IntervalEstimate stab(const std::vector<Interval>& iv) {
     return e;
 }
 
+namespace {
+
+using BracketPair = std::pair<Eigen::Vector2d, Eigen::Vector2d>;
+
+// By how much the circle of radius R misses a bracket whose ends lie ra and rb from its centre:
+// 0 when it crosses it, negative when it passes inside both ends.
+double bracket_miss(double R, double ra, double rb) {
+    const double lo = std::min(ra, rb), hi = std::max(ra, rb);
+    return R < lo ? R - lo : (R > hi ? R - hi : 0.0);
+}
+double bracket_miss(const Eigen::Vector3d& x, const BracketPair& b) {
+    return bracket_miss(x.z(), (b.first - x.head<2>()).norm(), (b.second - x.head<2>()).norm());
+}
+
+// Gauss–Newton on the circle x = (centre, radius) over the brackets in use: their misses plus the
+// midpoints' weak pull (weight wm), until the step is below a tenth of a nanometre.
+void gauss_newton_brackets(const std::vector<BracketPair>& br, const std::vector<std::uint8_t>& use,
+                           double wm, Eigen::Vector3d& x) {
+    constexpr int kMaxIterations = 50;
+    constexpr double kStepMm = 1e-10;
+    for (int it = 0; it < kMaxIterations; ++it) {
+        Eigen::Matrix3d JtJ = Eigen::Matrix3d::Zero();
+        Eigen::Vector3d Jtr = Eigen::Vector3d::Zero();
+        const Eigen::Vector2d c = x.head<2>();
+        for (std::size_t q = 0; q < br.size(); ++q) {
+            if (!use[q]) continue;
+            const Eigen::Vector2d dA = br[q].first - c, dB = br[q].second - c;
+            const Eigen::Vector2d dM = 0.5 * (dA + dB);
+            const double ra = dA.norm(), rb = dB.norm(), rm = dM.norm();
+            const double e = bracket_miss(x.z(), ra, rb);
+            if (e != 0.0) {
+                // d(R − r_X)/dc = +u_X (r_X decreases as c moves towards X)
+                const Eigen::Vector2d u = ((e < 0) == (ra < rb) ? dA / ra : dB / rb);
+                const Eigen::Vector3d J(u.x(), u.y(), 1.0);
+                JtJ += J * J.transpose();
+                Jtr += J * e;
+            }
+            const Eigen::Vector3d Jm(wm * dM.x() / rm, wm * dM.y() / rm, wm);
+            JtJ += Jm * Jm.transpose();
+            Jtr += Jm * (wm * (x.z() - rm));
+        }
+        const Eigen::Vector3d step = JtJ.ldlt().solve(-Jtr);
+        if (!step.allFinite()) break;
+        x += step;
+        if (step.norm() < kStepMm) break;
+    }
+}
+
+// Drops the brackets the circle x still misses by more than 3× their RMS miss (and at least
+// min_miss_mm): misclassified samples. Returns whether any was dropped.
+bool drop_missed_brackets(const std::vector<BracketPair>& br, const Eigen::Vector3d& x,
+                          double min_miss_mm, std::vector<std::uint8_t>& use) {
+    constexpr double kRejectK = 3.0;  // the 3σ rejection of the other robust fits (fit.hpp)
+    double s2 = 0;
+    std::int64_t n = 0;
+    for (std::size_t q = 0; q < br.size(); ++q) {
+        if (!use[q]) continue;
+        const double e = bracket_miss(x, br[q]);
+        s2 += e * e;
+        ++n;
+    }
+    const double lim = std::max(
+        kRejectK * std::sqrt(s2 / static_cast<double>(std::max<std::int64_t>(n, 1))), min_miss_mm);
+    bool changed = false;
+    for (std::size_t q = 0; q < br.size(); ++q) {
+        if (!use[q]) continue;
+        if (std::abs(bracket_miss(x, br[q])) > lim) {
+            use[q] = 0;
+            changed = true;
+        }
+    }
+    return changed;
+}
+
+}  // namespace
+
 // Circle through a set of brackets [A, B] (A on the surface, B beyond): each bracket holds the
 // edge, so the circle should cross every segment. Minimises the squared distance by which the
 // circle misses each bracket (zero inside), plus a weak pull (weight kMidpointPull) towards the
 // midpoints that picks a point inside the feasible set; brackets that still miss by more than
 // 3× the RMS miss are dropped and the fit repeated. Gauss–Newton from the midpoint circle.
-BracketCircle fit_circle_brackets(
-    const std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>>& br, const Eigen::Vector2d& c0,
-    double r0) {
+BracketCircle fit_circle_brackets(const std::vector<BracketPair>& br, const Eigen::Vector2d& c0,
+                                  double r0) {
     constexpr double kMidpointPull = 1e-4;  // weight² of the midpoint residuals
     // Brackets are exact to the ray geometry (µm); only a misclassified sample misses by more.
     constexpr double kMissLimitMm = 0.02;
+    constexpr int kMaxRounds = 4;  // of fit and rejection
     const double wm = std::sqrt(kMidpointPull);
     Eigen::Vector3d x(c0.x(), c0.y(), r0);
     std::vector<std::uint8_t> use(br.size(), 1);
-    auto miss = [](double R, double ra, double rb) {
-        const double lo = std::min(ra, rb), hi = std::max(ra, rb);
-        return R < lo ? R - lo : (R > hi ? R - hi : 0.0);
-    };
-    for (int round = 0; round < 4; ++round) {
-        for (int it = 0; it < 50; ++it) {
-            Eigen::Matrix3d JtJ = Eigen::Matrix3d::Zero();
-            Eigen::Vector3d Jtr = Eigen::Vector3d::Zero();
-            const Eigen::Vector2d c = x.head<2>();
-            for (std::size_t q = 0; q < br.size(); ++q) {
-                if (!use[q]) continue;
-                const Eigen::Vector2d dA = br[q].first - c, dB = br[q].second - c;
-                const Eigen::Vector2d dM = 0.5 * (dA + dB);
-                const double ra = dA.norm(), rb = dB.norm(), rm = dM.norm();
-                const double e = miss(x.z(), ra, rb);
-                if (e != 0.0) {
-                    // d(R − r_X)/dc = +u_X (r_X decreases as c moves towards X)
-                    const Eigen::Vector2d u = ((e < 0) == (ra < rb) ? dA / ra : dB / rb);
-                    const Eigen::Vector3d J(u.x(), u.y(), 1.0);
-                    JtJ += J * J.transpose();
-                    Jtr += J * e;
-                }
-                const Eigen::Vector3d Jm(wm * dM.x() / rm, wm * dM.y() / rm, wm);
-                JtJ += Jm * Jm.transpose();
-                Jtr += Jm * (wm * (x.z() - rm));
-            }
-            const Eigen::Vector3d step = JtJ.ldlt().solve(-Jtr);
-            if (!step.allFinite()) break;
-            x += step;
-            if (step.norm() < 1e-10) break;
-        }
-        // Drop brackets the circle still misses by far (misclassified samples).
-        double s2 = 0;
-        std::int64_t n = 0;
-        for (std::size_t q = 0; q < br.size(); ++q) {
-            if (!use[q]) continue;
-            const double e = miss(x.z(), (br[q].first - x.head<2>()).norm(),
-                                  (br[q].second - x.head<2>()).norm());
-            s2 += e * e;
-            ++n;
-        }
-        const double lim = std::max(
-            3.0 * std::sqrt(s2 / static_cast<double>(std::max<std::int64_t>(n, 1))), kMissLimitMm);
-        bool changed = false;
-        for (std::size_t q = 0; q < br.size(); ++q) {
-            if (!use[q]) continue;
-            const double e = miss(x.z(), (br[q].first - x.head<2>()).norm(),
-                                  (br[q].second - x.head<2>()).norm());
-            if (std::abs(e) > lim) {
-                use[q] = 0;
-                changed = true;
-            }
-        }
-        if (!changed) break;
+    for (int round = 0; round < kMaxRounds; ++round) {
+        gauss_newton_brackets(br, use, wm, x);
+        if (!drop_missed_brackets(br, x, kMissLimitMm, use)) break;
     }
     BracketCircle out{x.head<2>(), x.z(), 0};
     for (auto u : use) out.n_used += u;

@@ -190,6 +190,120 @@ double circle_residual(const CircleFit& c, const Eigen::Vector2d& p) {
     return (p - c.center).norm() - c.radius;
 }
 
+// Levenberg–Marquardt with Marquardt's diagonal scaling on (a, b, r), centred coordinates: moves
+// p from the Taubin seed to the geometric circle, ne kept its normal equations at p.
+struct CircleIterations {
+    int iterations = 0;
+    bool converged = false;
+};
+CircleIterations iterate_circle(std::span<const Eigen::Vector2d> points,
+                                const Eigen::Vector2d& mean, Eigen::Vector3d& p, CircleNormal& ne) {
+    constexpr int kMaxIterations = 100;
+    // Marquardt's damping: starts near Gauss–Newton, ×/÷ 10 per rejected/accepted step; beyond
+    // kLambdaMax no step descends.
+    constexpr double kLambdaStart = 1e-3, kLambdaFactor = 10.0;
+    constexpr double kLambdaMin = 1e-12, kLambdaMax = 1e12;
+    // Relative steps: below kGaussNewtonRel the plain Gauss–Newton steps, converged at
+    // kConvergedRel or when they stop shrinking below kRoundingFloorRel (see below).
+    constexpr double kGaussNewtonRel = 1e-6, kConvergedRel = 1e-12, kRoundingFloorRel = 1e-10;
+    double lambda = kLambdaStart;
+    double prev_rel = std::numeric_limits<double>::infinity();
+    bool converged = false;
+    int it = 0;
+    while (it < kMaxIterations && !converged) {
+        ++it;
+        const Eigen::Vector3d gn = ne.jtj.ldlt().solve(-ne.jtr);  // undamped Gauss–Newton step
+        if (!gn.allFinite()) break;
+        const double rel = gn.norm() / p.norm();
+        if (rel < kGaussNewtonRel) {
+            // Close to the minimum the change of SSR (~rel²) is below its rounding, so LM's
+            // accept/reject test is noise: take plain Gauss–Newton steps. Converged when the step
+            // is < 1e-12 relative, or when it stops shrinking below 1e-10 (rounding floor).
+            converged = rel <= kConvergedRel || (rel < kRoundingFloorRel && rel > 0.5 * prev_rel);
+            prev_rel = rel;
+            p += gn;
+            ne = circle_normal(points, mean, p);
+            continue;
+        }
+        // Levenberg–Marquardt with Marquardt's diagonal scaling.
+        Eigen::Matrix3d a = ne.jtj;
+        a.diagonal() += lambda * ne.jtj.diagonal();
+        const Eigen::Vector3d step = a.ldlt().solve(-ne.jtr);
+        if (!step.allFinite()) break;
+        const Eigen::Vector3d trial = p + step;
+        if (const double ssr = circle_ssr(points, mean, trial); ssr < ne.ssr) {
+            p = trial;
+            ne = circle_normal(points, mean, p);
+            lambda = std::max(lambda / kLambdaFactor, kLambdaMin);
+        } else if ((lambda *= kLambdaFactor) > kLambdaMax) {
+            break;  // no descent although far from a stationary point
+        }
+    }
+    return {it, converged};
+}
+
+// Covariance of the parameters: s² (JᵀJ)⁻¹ with s² = SSR / (n − 3), n > 3.
+void add_circle_uncertainty(const CircleNormal& ne, std::size_t n, CircleFit& f) {
+    const double s2 = ne.ssr / static_cast<double>(n - 3);
+    const Eigen::Matrix3d cov = s2 * ne.jtj.inverse();
+    if (!cov.allFinite()) return;
+    f.u_radius_mm = std::sqrt(std::max(cov(2, 2), 0.0));
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> ce(cov.topLeftCorner<2, 2>());
+    f.u_center_mm = std::sqrt(std::max(ce.eigenvalues()[1], 0.0));
+}
+
+// The best of `options.iterations` planes through 3 random points: the most points within
+// threshold_mm (RANSAC's consensus). count 0: every sample was collinear.
+struct PlaneHypothesis {
+    std::size_t count = 0;
+    Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+    Eigen::Vector3d point;
+};
+PlaneHypothesis best_sampled_plane(std::span<const Eigen::Vector3d> points,
+                                   const Eigen::Vector3d& c, const RansacOptions& options) {
+    // A cross product below 1e-12 of the extent² is rounding, not a normal.
+    constexpr double kCollinearRel2 = 1e-24;
+    const std::size_t n = points.size();
+    double extent2 = 0.0;
+    for (const auto& p : points) extent2 = std::max(extent2, (p - c).squaredNorm());
+    std::mt19937_64 rng(options.seed);
+    // Plain modulo draw: its bias is < n / 2^64 and, unlike std::uniform_int_distribution, it
+    // gives the same samples with every standard library.
+    auto draw = [&] { return static_cast<std::size_t>(rng() % n); };
+    PlaneHypothesis best;
+    best.point = c;
+    for (int it = 0; it < options.iterations; ++it) {
+        const std::size_t i = draw();
+        std::size_t j = draw(), k = draw();
+        while (j == i) j = draw();
+        while (k == i || k == j) k = draw();
+        const Eigen::Vector3d nrm = (points[j] - points[i]).cross(points[k] - points[i]);
+        // Skip (nearly) collinear samples: their normal is noise.
+        if (!(nrm.squaredNorm() > kCollinearRel2 * extent2 * extent2)) continue;
+        const Eigen::Vector3d unit = nrm.normalized();
+        const double offset = unit.dot(points[i]);
+        std::size_t count = 0;
+        for (const auto& p : points)
+            count += std::abs(unit.dot(p) - offset) <= options.threshold_mm;
+        if (count > best.count) best = {count, unit, points[i]};
+    }
+    return best;
+}
+
+// The points within threshold_mm of the plane (normal, point) into `subset`, their indices in
+// `points` into `index` (subset[s] == points[index[s]]).
+void collect_consensus(std::span<const Eigen::Vector3d> points, const Eigen::Vector3d& normal,
+                       const Eigen::Vector3d& point, double threshold_mm,
+                       std::vector<Eigen::Vector3d>& subset, std::vector<std::size_t>& index) {
+    subset.clear();
+    index.clear();
+    for (std::size_t i = 0; i < points.size(); ++i) {
+        if (std::abs(normal.dot(points[i] - point)) > threshold_mm) continue;
+        subset.push_back(points[i]);
+        index.push_back(i);
+    }
+}
+
 }  // namespace
 
 core::Result<PlaneFit> fit_plane(std::span<const Eigen::Vector3d> points) {
@@ -247,62 +361,20 @@ core::Result<CircleFit> fit_circle(std::span<const Eigen::Vector2d> points) {
     const Eigen::Vector2d mean = centroid(points);
     auto seed = taubin(points, mean);
     if (!seed) return seed.error();
-    // Levenberg–Marquardt with Marquardt's diagonal scaling on (a, b, r), centred coordinates.
     Eigen::Vector3d p(seed->center.x(), seed->center.y(), seed->radius);
     CircleNormal ne = circle_normal(points, mean, p);
-    double lambda = 1e-3;
-    double prev_rel = std::numeric_limits<double>::infinity();
-    bool converged = false;
-    int it = 0;
-    while (it < 100 && !converged) {
-        ++it;
-        const Eigen::Vector3d gn = ne.jtj.ldlt().solve(-ne.jtr);  // undamped Gauss–Newton step
-        if (!gn.allFinite()) break;
-        const double rel = gn.norm() / p.norm();
-        if (rel < 1e-6) {
-            // Close to the minimum the change of SSR (~rel²) is below its rounding, so LM's
-            // accept/reject test is noise: take plain Gauss–Newton steps. Converged when the step
-            // is < 1e-12 relative, or when it stops shrinking below 1e-10 (rounding floor).
-            converged = rel <= 1e-12 || (rel < 1e-10 && rel > 0.5 * prev_rel);
-            prev_rel = rel;
-            p += gn;
-            ne = circle_normal(points, mean, p);
-            continue;
-        }
-        // Levenberg–Marquardt with Marquardt's diagonal scaling.
-        Eigen::Matrix3d a = ne.jtj;
-        a.diagonal() += lambda * ne.jtj.diagonal();
-        const Eigen::Vector3d step = a.ldlt().solve(-ne.jtr);
-        if (!step.allFinite()) break;
-        const Eigen::Vector3d trial = p + step;
-        if (const double ssr = circle_ssr(points, mean, trial); ssr < ne.ssr) {
-            p = trial;
-            ne = circle_normal(points, mean, p);
-            lambda = std::max(lambda / 10.0, 1e-12);
-        } else if ((lambda *= 10.0) > 1e12) {
-            break;  // no descent although far from a stationary point
-        }
-    }
-    if (!converged || !p.allFinite() || !(p[2] > 0.0))
+    const CircleIterations lm = iterate_circle(points, mean, p, ne);
+    if (!lm.converged || !p.allFinite() || !(p[2] > 0.0))
         return core::make_error("circle fit: Levenberg-Marquardt did not converge in " +
-                                std::to_string(it) + " iterations");
+                                std::to_string(lm.iterations) + " iterations");
     CircleFit f;
     f.center = mean + p.head<2>();
     f.radius = p[2];
-    f.iterations = it;
+    f.iterations = lm.iterations;
     const std::size_t n = points.size();
     f.n_points = static_cast<std::int64_t>(n);
     f.rms_mm = std::sqrt(ne.ssr / static_cast<double>(n));
-    if (n > 3) {
-        // Covariance of the parameters: s² (JᵀJ)⁻¹ with s² = SSR / (n − 3).
-        const double s2 = ne.ssr / static_cast<double>(n - 3);
-        const Eigen::Matrix3d cov = s2 * ne.jtj.inverse();
-        if (cov.allFinite()) {
-            f.u_radius_mm = std::sqrt(std::max(cov(2, 2), 0.0));
-            const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> ce(cov.topLeftCorner<2, 2>());
-            f.u_center_mm = std::sqrt(std::max(ce.eigenvalues()[1], 0.0));
-        }
-    }
+    if (n > 3) add_circle_uncertainty(ne, n, f);
     return f;
 }
 
@@ -354,35 +426,8 @@ core::Result<RobustPlaneFit> ransac_plane(std::span<const Eigen::Vector3d> point
     if (!all_finite(points)) return core::make_error("ransac plane: non-finite coordinates");
     if (!(options.threshold_mm > 0.0))
         return core::make_error("ransac plane: threshold_mm must be positive");
-    const Eigen::Vector3d c = centroid(points);
-    double extent2 = 0.0;
-    for (const auto& p : points) extent2 = std::max(extent2, (p - c).squaredNorm());
-    std::mt19937_64 rng(options.seed);
-    // Plain modulo draw: its bias is < n / 2^64 and, unlike std::uniform_int_distribution, it
-    // gives the same samples with every standard library.
-    auto draw = [&] { return static_cast<std::size_t>(rng() % n); };
-    std::size_t best_count = 0;
-    Eigen::Vector3d best_normal = Eigen::Vector3d::UnitZ(), best_point = c;
-    for (int it = 0; it < options.iterations; ++it) {
-        const std::size_t i = draw();
-        std::size_t j = draw(), k = draw();
-        while (j == i) j = draw();
-        while (k == i || k == j) k = draw();
-        const Eigen::Vector3d nrm = (points[j] - points[i]).cross(points[k] - points[i]);
-        // Skip (nearly) collinear samples: their normal is noise.
-        if (!(nrm.squaredNorm() > 1e-24 * extent2 * extent2)) continue;
-        const Eigen::Vector3d unit = nrm.normalized();
-        const double offset = unit.dot(points[i]);
-        std::size_t count = 0;
-        for (const auto& p : points)
-            count += std::abs(unit.dot(p) - offset) <= options.threshold_mm;
-        if (count > best_count) {
-            best_count = count;
-            best_normal = unit;
-            best_point = points[i];
-        }
-    }
-    if (best_count < 3)
+    const PlaneHypothesis best = best_sampled_plane(points, centroid(points), options);
+    if (best.count < 3)
         return core::make_error("ransac plane: no plane with 3 or more inliers in " +
                                 std::to_string(options.iterations) + " iterations");
     // Refine: least squares on the consensus set, re-collect the consensus of the refined plane
@@ -391,19 +436,10 @@ core::Result<RobustPlaneFit> ransac_plane(std::span<const Eigen::Vector3d> point
     std::vector<std::size_t> index;  // subset[s] == points[index[s]]
     subset.reserve(n);
     index.reserve(n);
-    auto collect = [&](const Eigen::Vector3d& normal, const Eigen::Vector3d& point) {
-        subset.clear();
-        index.clear();
-        for (std::size_t i = 0; i < n; ++i) {
-            if (std::abs(normal.dot(points[i] - point)) > options.threshold_mm) continue;
-            subset.push_back(points[i]);
-            index.push_back(i);
-        }
-    };
-    collect(best_normal, best_point);
+    collect_consensus(points, best.normal, best.point, options.threshold_mm, subset, index);
     auto ls = fit_plane(subset);
     if (!ls) return core::make_error("ransac plane: " + ls.error().message);
-    collect(ls->normal, ls->point);
+    collect_consensus(points, ls->normal, ls->point, options.threshold_mm, subset, index);
     auto robust = fit_plane_robust(subset);
     if (!robust) return core::make_error("ransac plane: " + robust.error().message);
     RobustPlaneFit out;

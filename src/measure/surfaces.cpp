@@ -28,65 +28,96 @@ std::vector<Annulus> annuli_at(const core::AxisymmetricSolid& s, double z) {
     return out;
 }
 
-PlaneResult fit_level_plane(const std::vector<const FaceFrame*>& frames, double z_e, double band,
-                            double r_lo, double r_hi, const MeasureConfig& c,
-                            const std::string& what) {
-    PlaneResult out;
-    std::vector<Eigen::Vector3d> cand;
-    std::vector<std::int64_t> key;  // face index << 32 | profile
+namespace {
+
+// RANSAC on a level (docs/measurement.md, "Planes"): 100 hypotheses, a fixed seed so that a
+// recording always measures the same; its consensus band is the on-surface floor, at least 0.1 mm.
+constexpr int kRansacIterations = 100;
+constexpr std::uint64_t kRansacSeed = 7;
+constexpr double kMinRansacThresholdMm = 0.1;
+constexpr int kRejectRounds = 10;  // of the robust plane fits (fit.hpp's default)
+
+// Samples with their profile keys (face index << 32 | profile).
+struct KeyedPoints {
+    std::vector<Eigen::Vector3d> points;
+    std::vector<std::int64_t> keys;
+};
+
+// The samples of all faces within band of z_e and between r_lo and r_hi about the axis.
+KeyedPoints level_candidates(const std::vector<const FaceFrame*>& frames, double z_e, double band,
+                             double r_lo, double r_hi) {
+    KeyedPoints out;
     for (std::size_t fi = 0; fi < frames.size(); ++fi)
         frames[fi]->for_z(z_e - band, z_e + band, [&](const FaceFrame::Near& s) {
             if (std::abs(s.p.z() - z_e) <= band && s.r >= r_lo && s.r <= r_hi) {
-                cand.push_back(s.p.cast<double>());
-                key.push_back(static_cast<std::int64_t>(fi) << 32 | s.q / frames[fi]->w);
+                out.points.push_back(s.p.cast<double>());
+                out.keys.push_back(static_cast<std::int64_t>(fi) << 32 | s.q / frames[fi]->w);
             }
         });
-    if (static_cast<int>(cand.size()) < c.min_plane_points) {
-        out.error =
-            what + ": only " + std::to_string(cand.size()) + " points where the plane should be";
-        return out;
+    return out;
+}
+
+// A plane is known to a fraction of a micrometre from tens of thousands of points: beyond that,
+// an even subsample keeps the fit's cost bounded.
+void keep_at_most(KeyedPoints& cand, std::size_t max_points) {
+    if (cand.points.size() <= max_points) return;
+    const std::size_t keep_every = (cand.points.size() + max_points - 1) / max_points;
+    std::size_t m = 0;
+    for (std::size_t q = 0; q < cand.points.size(); q += keep_every, ++m) {
+        cand.points[m] = cand.points[q];
+        cand.keys[m] = cand.keys[q];
     }
-    // A plane is known to a fraction of a micrometre from tens of thousands of points: beyond
-    // that, an even subsample keeps the fit's cost bounded.
-    constexpr std::size_t kMaxPlanePoints = 20000;
-    if (cand.size() > kMaxPlanePoints) {
-        const std::size_t keep_every = (cand.size() + kMaxPlanePoints - 1) / kMaxPlanePoints;
-        std::size_t m = 0;
-        for (std::size_t q = 0; q < cand.size(); q += keep_every, ++m) {
-            cand[m] = cand[q];
-            key[m] = key[q];
-        }
-        cand.resize(m);
-        key.resize(m);
-    }
-    // RANSAC scores hypotheses on an even subsample (a few thousand points decide a plane as
-    // well as a few hundred thousand); all candidates are then classified against its plane.
+    cand.points.resize(m);
+    cand.keys.resize(m);
+}
+
+// RANSAC scores hypotheses on an even subsample (a few thousand points decide a plane as well as
+// a few hundred thousand); all candidates are then classified against its plane: those within
+// `thr` of it.
+core::Result<KeyedPoints> ransac_consensus(const KeyedPoints& cand, double thr) {
     constexpr std::size_t kRansacPoints = 4000;
-    const double ransac_thr = std::max(c.on_surface_min_mm, 0.1);
     std::vector<Eigen::Vector3d> sub;
-    const std::size_t stride = std::max<std::size_t>(1, cand.size() / kRansacPoints);
-    for (std::size_t q = 0; q < cand.size(); q += stride) sub.push_back(cand[q]);
-    auto seed = ransac_plane(sub, {ransac_thr, 100, 7});
-    if (!seed) {
-        out.error = what + ": " + seed.error().message;
+    const std::size_t stride = std::max<std::size_t>(1, cand.points.size() / kRansacPoints);
+    for (std::size_t q = 0; q < cand.points.size(); q += stride) sub.push_back(cand.points[q]);
+    auto seed = ransac_plane(sub, {thr, kRansacIterations, kRansacSeed});
+    if (!seed) return seed.error();
+    KeyedPoints in;
+    for (std::size_t q = 0; q < cand.points.size(); ++q)
+        if (std::abs(seed->fit.distance(cand.points[q])) <= thr) {
+            in.points.push_back(cand.points[q]);
+            in.keys.push_back(cand.keys[q]);
+        }
+    return in;
+}
+
+}  // namespace
+
+PlaneResult fit_level_plane(const std::vector<const FaceFrame*>& frames, double z_e, double band,
+                            double r_lo, double r_hi, const MeasureConfig& c,
+                            const std::string& what) {
+    constexpr std::size_t kMaxPlanePoints = 20000;  // keep_at_most: why
+    PlaneResult out;
+    KeyedPoints cand = level_candidates(frames, z_e, band, r_lo, r_hi);
+    if (static_cast<int>(cand.points.size()) < c.min_plane_points) {
+        out.error = what + ": only " + std::to_string(cand.points.size()) +
+                    " points where the plane should be";
         return out;
     }
-    std::vector<Eigen::Vector3d> in;
-    std::vector<std::int64_t> in_key;
-    for (std::size_t q = 0; q < cand.size(); ++q)
-        if (std::abs(seed->fit.distance(cand[q])) <= ransac_thr) {
-            in.push_back(cand[q]);
-            in_key.push_back(key[q]);
-        }
-    auto fit = fit_plane_robust(in, {c.on_surface_k_sigma, 0.0, 10});
+    keep_at_most(cand, kMaxPlanePoints);
+    const auto in = ransac_consensus(cand, std::max(c.on_surface_min_mm, kMinRansacThresholdMm));
+    if (!in) {
+        out.error = what + ": " + in.error().message;
+        return out;
+    }
+    auto fit = fit_plane_robust(in->points, {c.on_surface_k_sigma, 0.0, kRejectRounds});
     if (!fit) {
         out.error = what + ": " + fit.error().message;
         return out;
     }
-    for (std::size_t q = 0; q < in.size(); ++q)
+    for (std::size_t q = 0; q < in->points.size(); ++q)
         if (fit->inlier[q]) {
-            out.points.push_back(in[q]);
-            out.profile_keys.push_back(in_key[q]);
+            out.points.push_back(in->points[q]);
+            out.profile_keys.push_back(in->keys[q]);
         }
     out.fit = fit->fit;
     return out;
@@ -152,77 +183,113 @@ bool curved_across(const PlaneResult& pl) {
     return cone || bend;
 }
 
+// The bins of keep_flat_part: 0.25 mm wide; one with fewer than 20 samples is too sparse to
+// judge, and one sits off the plane when its mean is beyond 4σ of it and 4 µm.
+constexpr double kBinMm = 0.25, kMinOffMm = 0.004, kOffSigma = 4.0;
+constexpr std::size_t kMinBin = 20;
+
+// A plane's inliers in radial bins of kBinMm about the axis, from the innermost one: the sum and
+// count of their distances from the plane.
+struct RadialBins {
+    double r_lo = 1e300, r_hi = -1e300;
+    std::size_t nb = 0;
+    std::vector<double> sum;
+    std::vector<std::size_t> cnt;
+    std::size_t of(const Eigen::Vector3d& p) const {
+        return std::min(nb - 1, static_cast<std::size_t>((p.head<2>().norm() - r_lo) / kBinMm));
+    }
+    // How far bin b sits off the plane beyond its noise, or 0 (within it, or too few to tell).
+    double off(std::size_t b, double rms_mm) const {
+        if (cnt[b] < kMinBin) return 0.0;  // too few to tell
+        const double mean = sum[b] / static_cast<double>(cnt[b]);
+        const double limit =
+            std::max(kMinOffMm, kOffSigma * rms_mm / std::sqrt(static_cast<double>(cnt[b])));
+        return std::abs(mean) > limit ? std::abs(mean) : 0.0;
+    }
+};
+
+RadialBins radial_bins(const PlaneResult& pl) {
+    RadialBins bins;
+    for (const auto& p : pl.points) {
+        bins.r_lo = std::min(bins.r_lo, p.head<2>().norm());
+        bins.r_hi = std::max(bins.r_hi, p.head<2>().norm());
+    }
+    bins.nb = static_cast<std::size_t>((bins.r_hi - bins.r_lo) / kBinMm) + 1;
+    bins.sum.assign(bins.nb, 0.0);
+    bins.cnt.assign(bins.nb, 0);
+    for (const auto& p : pl.points) {
+        bins.sum[bins.of(p)] += pl.fit.distance(p);
+        bins.cnt[bins.of(p)]++;
+    }
+    return bins;
+}
+
+// Why a narrow face's bins cannot tell its flat part from its fillets, or empty.
+std::string narrow_unjudgeable(const RadialBins& bins, const PlaneResult& pl,
+                               const std::string& what) {
+    // Seen across less than a bin: nothing tells its flat part from its fillets (a 0.1 mm band of
+    // the bore step's fillet, 64 samples, looked flat and read Height 1 0.12 mm small with u
+    // 0.02 mm), so no plane.
+    if (bins.nb < 2)
+        return what + ": " + std::to_string(bins.r_hi - bins.r_lo) +
+               " mm of the face seen, narrower than the " + std::to_string(kBinMm) +
+               " mm that tell its flat part from its fillets";
+    // Edge bins too sparse to judge: its fillet tails cannot be told from its flat part (the bore
+    // step seen through a 39 mm deep bore: 109 samples, 0.05 mm off), so no plane.
+    if (bins.cnt[0] < kMinBin || bins.cnt[bins.nb - 1] < kMinBin)
+        return what + ": too few samples (" + std::to_string(pl.points.size()) +
+               ") to tell its flat part from its fillets";
+    return {};
+}
+
+std::string no_flat_part(const RadialBins& bins, const std::string& what) {
+    return what + ": no flat part between its fillets (" + std::to_string(bins.r_hi - bins.r_lo) +
+           " mm of the face seen, curved across)";
+}
+
+// The plane fitted again without bin `drop`; false (and pl.error) when too few points are left
+// or the face has fewer than three bins: no flat part.
+bool refit_without_bin(PlaneResult& pl, const RadialBins& bins, std::size_t drop,
+                       const MeasureConfig& c, const std::string& what) {
+    PlaneResult kept;
+    for (std::size_t q = 0; q < pl.points.size(); ++q)
+        if (bins.of(pl.points[q]) != drop) {
+            kept.points.push_back(pl.points[q]);
+            kept.profile_keys.push_back(pl.profile_keys[q]);
+        }
+    auto fit = kept.points.size() >= static_cast<std::size_t>(c.min_plane_points)
+                   ? fit_plane_robust(kept.points, {c.on_surface_k_sigma, 0.0, kRejectRounds})
+                   : core::Result<RobustPlaneFit>(core::make_error("too few points"));
+    if (!fit || bins.nb < 3) {
+        pl.error = no_flat_part(bins, what);
+        return false;
+    }
+    pl.fit = fit->fit;
+    pl.points = std::move(kept.points);
+    pl.profile_keys = std::move(kept.profile_keys);
+    return true;
+}
+
 // The plane on the level's flat part only (forged parts): the inliers in radial bins of 0.25 mm
 // about the axis; while the innermost or outermost bin sits off the plane by more than its noise
 // allows (a fillet's tail running into the annulus), it is dropped and the plane fitted again.
 void keep_flat_part(PlaneResult& pl, bool narrow, const MeasureConfig& c, const std::string& what) {
-    constexpr double kBinMm = 0.25, kMinOffMm = 0.004;
-    constexpr std::size_t kMinBin = 20;
-    for (int round = 0; round < 40; ++round) {
-        double r_lo = 1e300, r_hi = -1e300;
-        for (const auto& p : pl.points) {
-            r_lo = std::min(r_lo, p.head<2>().norm());
-            r_hi = std::max(r_hi, p.head<2>().norm());
-        }
-        const auto nb = static_cast<std::size_t>((r_hi - r_lo) / kBinMm) + 1;
-        std::vector<double> sum(nb, 0.0);
-        std::vector<std::size_t> cnt(nb, 0);
-        auto bin = [&](const Eigen::Vector3d& p) {
-            return std::min(nb - 1, static_cast<std::size_t>((p.head<2>().norm() - r_lo) / kBinMm));
-        };
-        for (const auto& p : pl.points) {
-            sum[bin(p)] += pl.fit.distance(p);
-            cnt[bin(p)]++;
-        }
-        // A narrow face seen across less than a bin: nothing tells its flat part from its
-        // fillets (a 0.1 mm band of the bore step's fillet, 64 samples, looked flat and read
-        // Height 1 0.12 mm small with u 0.02 mm), so no plane.
-        if (narrow && nb < 2) {
-            pl.error = what + ": " + std::to_string(r_hi - r_lo) +
-                       " mm of the face seen, narrower than the " + std::to_string(kBinMm) +
-                       " mm that tell its flat part from its fillets";
-            return;
-        }
-        // A narrow face whose edge bins are too sparse to judge: its fillet tails cannot be
-        // told from its flat part (the bore step seen through a 39 mm deep bore: 109 samples,
-        // 0.05 mm off), so no plane.
-        if (narrow && (cnt[0] < kMinBin || cnt[nb - 1] < kMinBin)) {
-            pl.error = what + ": too few samples (" + std::to_string(pl.points.size()) +
-                       ") to tell its flat part from its fillets";
-            return;
-        }
-        auto off = [&](std::size_t b) {
-            if (cnt[b] < kMinBin) return 0.0;  // too few to tell
-            const double mean = sum[b] / static_cast<double>(cnt[b]);
-            const double limit =
-                std::max(kMinOffMm, 4.0 * pl.fit.rms_mm / std::sqrt(static_cast<double>(cnt[b])));
-            return std::abs(mean) > limit ? std::abs(mean) : 0.0;
-        };
-        const double lo = off(0), hi = off(nb - 1);
-        if (lo == 0.0 && hi == 0.0) {
-            if (narrow && curved_across(pl))
-                pl.error = what + ": no flat part between its fillets (" +
-                           std::to_string(r_hi - r_lo) + " mm of the face seen, curved across)";
-            return;
-        }
-        const std::size_t drop = lo >= hi ? 0 : nb - 1;
-        PlaneResult kept;
-        for (std::size_t q = 0; q < pl.points.size(); ++q)
-            if (bin(pl.points[q]) != drop) {
-                kept.points.push_back(pl.points[q]);
-                kept.profile_keys.push_back(pl.profile_keys[q]);
+    constexpr int kMaxRounds = 40;
+    for (int round = 0; round < kMaxRounds; ++round) {
+        const RadialBins bins = radial_bins(pl);
+        if (narrow) {
+            std::string why = narrow_unjudgeable(bins, pl, what);
+            if (!why.empty()) {
+                pl.error = std::move(why);
+                return;
             }
-        auto fit = kept.points.size() >= static_cast<std::size_t>(c.min_plane_points)
-                       ? fit_plane_robust(kept.points, {c.on_surface_k_sigma, 0.0, 10})
-                       : core::Result<RobustPlaneFit>(core::make_error("too few points"));
-        if (!fit || nb < 3) {
-            pl.error = what + ": no flat part between its fillets (" + std::to_string(r_hi - r_lo) +
-                       " mm of the face seen, curved across)";
+        }
+        const double lo = bins.off(0, pl.fit.rms_mm), hi = bins.off(bins.nb - 1, pl.fit.rms_mm);
+        if (lo == 0.0 && hi == 0.0) {
+            if (narrow && curved_across(pl)) pl.error = no_flat_part(bins, what);
             return;
         }
-        pl.fit = fit->fit;
-        pl.points = std::move(kept.points);
-        pl.profile_keys = std::move(kept.profile_keys);
+        if (!refit_without_bin(pl, bins, lo >= hi ? 0 : bins.nb - 1, c, what)) return;
     }
 }
 

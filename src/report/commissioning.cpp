@@ -73,8 +73,8 @@ std::string geometry_table(const calib::Commissioning& c) {
         "<th>travel scale</th><th>scan direction turned °</th></tr>\n";
     for (const auto& f : c.faces) {
         if (!f.aligned) continue;
-        const calib::FaceGeometry& a = f.recorded;
-        const calib::FaceGeometry& b = f.aligned->geometry;
+        const calib::FaceCalibration& a = f.recorded;
+        const calib::FaceCalibration& b = f.aligned->geometry;
         auto xyz = [](const Eigen::Vector3d& p) {
             return fixed(p.x(), 3) + ", " + fixed(p.y(), 3) + ", " + fixed(p.z(), 3);
         };

@@ -28,39 +28,6 @@ std::string base64(const std::vector<std::uint8_t>& bytes) {
 
 }  // namespace
 
-std::string escape(std::string_view text) {
-    std::string out;
-    out.reserve(text.size());
-    for (const char c : text) {
-        switch (c) {
-            case '&':
-                out += "&amp;";
-                break;
-            case '<':
-                out += "&lt;";
-                break;
-            case '>':
-                out += "&gt;";
-                break;
-            case '"':
-                out += "&quot;";
-                break;
-            case '\'':
-                out += "&#39;";
-                break;
-            default:
-                out += c;
-        }
-    }
-    return out;
-}
-
-std::string fixed(double value, int decimals, bool sign) {
-    char b[64];
-    std::snprintf(b, sizeof b, sign ? "%+.*f" : "%.*f", decimals, value);
-    return b;
-}
-
 std::vector<std::uint8_t> png_bytes(const RgbImage& image) {
     assert(image.width > 0 && image.height > 0);
     // OpenCV wants BGR; the copy is the picture's size, small beside the scan behind it.

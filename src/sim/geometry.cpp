@@ -29,12 +29,7 @@ double uniform(std::mt19937_64& rng, double half) {
 
 calib::SensorModel sensor_model(const SensorConfig& s) {
     calib::SensorModel m;
-    m.width = s.width;
-    m.pitch_mm = s.pitch_mm;
-    m.standoff_mm = s.standoff_mm;
-    m.min_range_mm = s.min_range_mm;
-    m.max_range_mm = s.max_range_mm;
-    m.baseline_mm = s.camera_center_mm.y();
+    m.design() = s.design();
     return m;
 }
 
@@ -46,12 +41,8 @@ calib::Calibration nominal_calibration(const CellConfig& cell, const std::string
     c.source = source;
     c.sensor = sensor_model(cell.sensor);
     for (const auto& f : cell.faces) {
-        calib::FaceGeometry g;
-        g.name = f.name;
-        g.T_world_camera = f.T_world_camera;
-        g.scan_direction = f.scan_direction;
-        g.travel_scale = f.travel_scale;
-        g.R_camera_accel = f.R_camera_accel;
+        calib::FaceCalibration g;
+        g.geometry() = f.geometry();
         c.faces.push_back(g);
     }
     c.clock_offset_ns = cell.clock_offset_ns;
@@ -91,13 +82,10 @@ core::Result<CellConfig> with_geometry(CellConfig cell, const calib::Calibration
                                 ": its sensor model is not the cell config's sensor (the "
                                 "simulator renders with the config's)");
     for (auto& f : cell.faces) {
-        const calib::FaceGeometry* g = truth.face(f.name);
+        const calib::FaceCalibration* g = truth.face(f.name);
         if (!g)
             return core::make_error(truth_file + ": no face '" + f.name + "' (the cell has it)");
-        f.T_world_camera = g->T_world_camera;
-        f.scan_direction = g->scan_direction;
-        f.travel_scale = g->travel_scale;
-        f.R_camera_accel = g->R_camera_accel;
+        f.geometry() = g->geometry();  // the same name: found by it
     }
     cell.clock_offset_ns = truth.clock_offset_ns;
     cell.accel.fixed_bias_mps2 = truth.accel_bias_mps2;

@@ -261,7 +261,7 @@ void Scene::cast_profile(const FaceConfig& fc, const Eigen::Vector3d& origin, Ra
     out.assign(static_cast<std::size_t>(s.width), RayReturn{kNaN, kNaN, 0.0f, false});
     const double cos_max_incidence = std::cos(s.max_incidence_deg * kDeg);
     const Eigen::Matrix3d R = fc.T_world_camera.linear();
-    const Eigen::Vector3d imager = origin + R * s.camera_center_mm;
+    const Eigen::Vector3d imager = origin + R * s.imager_mm();
     for (int i = 0; i < s.width; ++i) {
         const Eigen::Vector3d d = R * dir_cam_[i];
         const auto hit = cast(solid_, T_part_world_, spheres_, fc.support_visible,

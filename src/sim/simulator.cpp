@@ -38,23 +38,17 @@ std::vector<const FaceConfig*> faces_to_scan(const CellConfig& cell, const SimOp
 
 // What the cell's software writes for a face: the calibration in force, or the truth.
 struct Recorded {
-    Eigen::Isometry3d T_world_camera;
-    Eigen::Vector3d scan_direction;
-    Eigen::Matrix3d R_camera_accel;
-    double travel_scale;
+    core::FaceGeometry geometry;
     std::int64_t clock_offset_ns;
 };
 
 core::Result<Recorded> recorded_geometry(const FaceConfig& fc, const CellConfig& cell,
                                          const SimOptions& opt) {
-    if (!opt.in_force)
-        return Recorded{fc.T_world_camera, fc.scan_direction, fc.R_camera_accel, fc.travel_scale,
-                        cell.clock_offset_ns};
-    const calib::FaceGeometry* g = opt.in_force->face(fc.name);
+    if (!opt.in_force) return Recorded{fc.geometry(), cell.clock_offset_ns};
+    const calib::FaceCalibration* g = opt.in_force->face(fc.name);
     if (!g)
         return core::make_error("simulate: the calibration in force has no face '" + fc.name + "'");
-    return Recorded{g->T_world_camera, g->scan_direction, g->R_camera_accel, g->travel_scale,
-                    opt.in_force->clock_offset_ns};
+    return Recorded{g->geometry(), opt.in_force->clock_offset_ns};
 }
 
 // The accelerometer record of one face: a_acc = R_accᵀ·(ü/1000 + g_up) + bias + noise, clipped,
@@ -89,11 +83,8 @@ core::Result<void> scan_face(const Scene& scene, const CellConfig& cell, const F
     const auto& s = cell.sensor;
     auto rg = recorded_geometry(fc, cell, opt);
     if (!rg) return rg.error();
+    face.geometry() = rg->geometry;
     face.name = ft.name = fc.name;
-    face.T_world_camera = rg->T_world_camera;
-    face.scan_direction = rg->scan_direction;
-    face.R_camera_accel = rg->R_camera_accel;
-    face.travel_scale = rg->travel_scale;
     face.clock_offset_ns = rg->clock_offset_ns;
     face.geometry_from_calibration = true;  // as the cell's software writes it
     face.width = s.width;
@@ -107,7 +98,7 @@ core::Result<void> scan_face(const Scene& scene, const CellConfig& cell, const F
         // Camera clock = true − the cell's offset; the software adds the offset it believes.
         face.profile_times_ns.push_back(t0_ns + std::llround(tk * kNsPerS) - cell.clock_offset_ns +
                                         rg->clock_offset_ns);
-        face.profile_positions_mm.push_back(commanded * rg->travel_scale);
+        face.profile_positions_mm.push_back(commanded * rg->geometry.travel_scale);
         const Eigen::Vector3d u = vib.displacement_mm(tk);
         ft.displacement_mm.push_back(u);
         const Eigen::Vector3d origin =

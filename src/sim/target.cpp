@@ -16,7 +16,7 @@ constexpr double kDeg = std::numbers::pi / 180.0;
 
 VirtualSensorCamera design_sensor_camera(const SensorConfig& s) {
     VirtualSensorCamera h;
-    const Eigen::Vector3d C = s.camera_center_mm;  // laser frame
+    const Eigen::Vector3d C = s.imager_mm();  // laser frame
     const Eigen::Vector3d aim(0.0, 0.0, 0.5 * (s.min_range_mm + s.max_range_mm));
     const Eigen::Vector3d z = (aim - C).normalized();
     const Eigen::Vector3d x = Eigen::Vector3d::UnitX();

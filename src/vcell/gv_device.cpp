@@ -1,26 +1,27 @@
+// The virtual camera's control channel (GVCP) and its start: discovery, register and memory
+// access to Aravis's fake camera, the controller's privilege and heartbeat, and PACKETRESEND
+// from the resend buffer. The stream channel is in gv_stream.cpp.
 #include "hotgauge/vcell/gv_device.hpp"
 
-#include <arpa/inet.h>
-#include <arv.h>
-#include <netinet/in.h>
 #include <poll.h>
 #include <sys/socket.h>
-#include <unistd.h>
 
-#include <atomic>
 #include <cerrno>
-#include <chrono>
 #include <cstring>
-#include <deque>
-#include <mutex>
-#include <random>
-#include <thread>
+#include <string>
 #include <vector>
 
+#include "gv_device_impl.hpp"
 #include "log.hpp"
 
 namespace hotgauge::vcell {
 namespace {
+
+using detail::get16;
+using detail::get32;
+using detail::put16;
+using detail::put32;
+using detail::real_time_us;
 
 // GigE Vision 2.x control protocol (GVCP, UDP port 3956): command and acknowledge codes, status
 // codes and bootstrap registers used here.
@@ -39,31 +40,7 @@ constexpr std::uint16_t kStatusAccessDenied = 0x8006;
 constexpr std::uint32_t kDiscoveryDataSize = 0xf8;
 constexpr std::uint32_t kGvcpCapabilityRegister = 0x0934;
 constexpr std::uint32_t kCapabilityWriteMemory = 1u << 1, kCapabilityPacketResend = 1u << 2;
-constexpr std::uint32_t kStreamPacketSizeRegister = 0x0d04;
 constexpr std::size_t kMaxReadMemory = 536;  // GVCP's limit per READMEM
-// Stream protocol (GVSP): packet formats, image payload type, and the IP + UDP + GVSP header
-// bytes that the packet size register includes.
-constexpr std::uint8_t kGvspLeader = 0x01, kGvspTrailer = 0x02, kGvspPayload = 0x03;
-constexpr std::uint8_t kGvspMultipart = 0x07;
-constexpr std::uint16_t kPayloadImage = 0x0001, kPayloadMultipart = 0x000a;
-constexpr std::uint16_t kPartData2dImage = 0x0001;
-constexpr int kGvspOverheadBytes = 20 + 8 + 8;
-// Extended ids: IP + UDP + the 20-byte extended header + the 8-byte part header of each packet.
-constexpr int kGvspMultipartOverheadBytes = 20 + 8 + 20 + 8;
-
-void put16(std::vector<std::uint8_t>& b, std::uint32_t v) {
-    b.push_back(static_cast<std::uint8_t>(v >> 8));
-    b.push_back(static_cast<std::uint8_t>(v));
-}
-void put32(std::vector<std::uint8_t>& b, std::uint32_t v) {
-    put16(b, v >> 16);
-    put16(b, v & 0xffff);
-}
-std::uint16_t get16(const std::uint8_t* p) { return static_cast<std::uint16_t>(p[0] << 8 | p[1]); }
-std::uint32_t get32(const std::uint8_t* p) {
-    return static_cast<std::uint32_t>(p[0]) << 24 | static_cast<std::uint32_t>(p[1]) << 16 |
-           static_cast<std::uint32_t>(p[2]) << 8 | p[3];
-}
 
 std::vector<std::uint8_t> ack_header(std::uint16_t status, std::uint16_t answer, std::size_t length,
                                      std::uint16_t id) {
@@ -76,189 +53,105 @@ std::vector<std::uint8_t> ack_header(std::uint16_t status, std::uint16_t answer,
     return b;
 }
 
-std::vector<std::uint8_t> gvsp_header(std::uint16_t block_id, std::uint8_t format,
-                                      std::uint32_t packet_id) {
-    std::vector<std::uint8_t> b;
-    put16(b, 0);  // status: success
-    put16(b, block_id);
-    put32(b, static_cast<std::uint32_t>(format) << 24 | (packet_id & 0xffffff));
-    return b;
-}
-
-// One image payload (GVSP payload type 0x0001), standard ids: leader, data, trailer.
-std::vector<std::vector<std::uint8_t>> image_packets(const FrameRequest& req,
-                                                     std::uint32_t packet_size,
-                                                     const std::vector<std::uint8_t>& data) {
-    const std::size_t chunk = packet_size - kGvspOverheadBytes;
-    const auto block = static_cast<std::uint16_t>(req.frame_id);
-    std::vector<std::vector<std::uint8_t>> packets;
-    std::uint32_t packet_id = 0;
-    auto leader = gvsp_header(block, kGvspLeader, packet_id++);
-    put16(leader, 0);  // flags
-    put16(leader, kPayloadImage);
-    const auto ts = static_cast<std::uint64_t>(req.timestamp_ns);
-    put32(leader, static_cast<std::uint32_t>(ts >> 32));
-    put32(leader, static_cast<std::uint32_t>(ts & 0xffffffffu));
-    put32(leader, req.pixel_format);
-    put32(leader, static_cast<std::uint32_t>(req.width));
-    put32(leader, static_cast<std::uint32_t>(req.height));
-    put32(leader, static_cast<std::uint32_t>(req.offset_x));
-    put32(leader, static_cast<std::uint32_t>(req.offset_y));
-    put16(leader, 0);  // padding x
-    put16(leader, 0);  // padding y
-    packets.push_back(std::move(leader));
-    for (std::size_t offset = 0; offset < data.size(); offset += chunk) {
-        auto p = gvsp_header(block, kGvspPayload, packet_id++);
-        const std::size_t n = std::min(chunk, data.size() - offset);
-        p.insert(p.end(), data.begin() + static_cast<std::ptrdiff_t>(offset),
-                 data.begin() + static_cast<std::ptrdiff_t>(offset + n));
-        packets.push_back(std::move(p));
-    }
-    auto trailer = gvsp_header(block, kGvspTrailer, packet_id++);
-    put16(trailer, 0);
-    put16(trailer, kPayloadImage);
-    put32(trailer, static_cast<std::uint32_t>(req.height));
-    packets.push_back(std::move(trailer));
-    return packets;
-}
-
-// GigE Vision 2.1 extended-id header: status, flags, EI bit + format + (leader) part count,
-// 64-bit block id, 32-bit packet id.
-std::vector<std::uint8_t> gvsp_extended_header(std::uint64_t block_id, std::uint8_t format,
-                                               std::uint32_t low_byte, std::uint32_t packet_id) {
-    std::vector<std::uint8_t> b;
-    put16(b, 0);  // status: success
-    put16(b, 0);  // flags
-    put32(b, 0x80000000u | static_cast<std::uint32_t>(format) << 24 | (low_byte & 0xff));
-    put32(b, static_cast<std::uint32_t>(block_id >> 32));
-    put32(b, static_cast<std::uint32_t>(block_id & 0xffffffffu));
-    put32(b, packet_id);
-    return b;
-}
-
-// A multi-part payload (type 0x000A), as 3D sensors send range and intensity: the frame's rows
-// split into `n_parts` equal parts, each a 2D image part; extended ids (Aravis reads the part
-// count from the leader's low byte, which standard ids would take for the packet id).
-std::vector<std::vector<std::uint8_t>> multipart_packets(const FrameRequest& req,
-                                                         std::uint32_t packet_size,
-                                                         const std::vector<std::uint8_t>& data,
-                                                         int n_parts) {
-    const std::size_t chunk = packet_size - kGvspMultipartOverheadBytes;
-    const std::uint64_t block = req.frame_id;
-    const int part_rows = req.height / n_parts;
-    const std::size_t part_bytes = static_cast<std::size_t>(req.width) *
-                                   static_cast<std::size_t>(part_rows) *
-                                   static_cast<std::size_t>(std::max(1, req.bytes_per_pixel));
-    std::vector<std::vector<std::uint8_t>> packets;
-    std::uint32_t packet_id = 0;
-    auto leader =
-        gvsp_extended_header(block, kGvspLeader, static_cast<std::uint32_t>(n_parts), packet_id++);
-    put16(leader, 0);  // flags
-    put16(leader, kPayloadMultipart);
-    const auto ts = static_cast<std::uint64_t>(req.timestamp_ns);
-    put32(leader, static_cast<std::uint32_t>(ts >> 32));
-    put32(leader, static_cast<std::uint32_t>(ts & 0xffffffffu));
-    for (int i = 0; i < n_parts; ++i) {  // 48 bytes of part description each
-        put16(leader, kPartData2dImage);
-        put16(leader, 0);  // part length, high 16 bits
-        put32(leader, static_cast<std::uint32_t>(part_bytes));
-        put32(leader, req.pixel_format);
-        put16(leader, 0);                              // reserved
-        leader.push_back(0);                           // source id
-        leader.push_back(0);                           // additional zones
-        put32(leader, 0);                              // zone directions
-        put16(leader, static_cast<std::uint32_t>(i));  // data purpose id: the component
-        put16(leader, 0);                              // region id
-        put32(leader, static_cast<std::uint32_t>(req.width));
-        put32(leader, static_cast<std::uint32_t>(part_rows));
-        put32(leader, static_cast<std::uint32_t>(req.offset_x));
-        put32(leader, static_cast<std::uint32_t>(req.offset_y));
-        put16(leader, 0);  // padding x
-        put16(leader, 0);  // padding y
-        put32(leader, 0);  // reserved
-    }
-    packets.push_back(std::move(leader));
-    for (int i = 0; i < n_parts; ++i) {
-        const std::size_t base = static_cast<std::size_t>(i) * part_bytes;
-        for (std::size_t offset = 0; offset < part_bytes && base + offset < data.size();
-             offset += chunk) {
-            auto p = gvsp_extended_header(block, kGvspMultipart, 0, packet_id++);
-            const std::size_t n =
-                std::min({chunk, part_bytes - offset, data.size() - base - offset});
-            const std::uint64_t at = base + offset;     // where the bytes go in the whole buffer
-            p.push_back(static_cast<std::uint8_t>(i));  // part id
-            p.push_back(0);                             // zone info
-            put16(p, static_cast<std::uint32_t>(at >> 32));
-            put32(p, static_cast<std::uint32_t>(at & 0xffffffffu));
-            p.insert(p.end(), data.begin() + static_cast<std::ptrdiff_t>(at),
-                     data.begin() + static_cast<std::ptrdiff_t>(at + n));
-            packets.push_back(std::move(p));
-        }
-    }
-    auto trailer = gvsp_extended_header(block, kGvspTrailer, 0, packet_id++);
-    put16(trailer, 0);
-    put16(trailer, kPayloadMultipart);
-    put32(trailer, 0);
-    packets.push_back(std::move(trailer));
-    return packets;
-}
-
-std::int64_t real_time_us() { return g_get_real_time(); }
-
 bool same_endpoint(const sockaddr_in& a, const sockaddr_in& b) {
     return a.sin_addr.s_addr == b.sin_addr.s_addr && a.sin_port == b.sin_port;
 }
 
-}  // namespace
-
-struct GvDevice::Impl {
-    GvDeviceConfig config;
-    Renderer renderer;
-    std::string where;  // "virtual camera SERIAL at ADDRESS"
-    ArvFakeCamera* camera = nullptr;
-    std::mutex camera_mutex;  // ArvFakeCamera is not thread-safe: every call holds this
-    int gvcp_fd = -1, gvsp_fd = -1;
-    std::thread control, stream;
-    std::atomic<bool> stop{false};
-
-    // AcquisitionStart commands received: a stop and a start between two frames are still a new
-    // acquisition (its frame 0 starts the axis again). Written and read under camera_mutex.
-    std::uint64_t acquisition_starts = 0;
-    std::int64_t acquisition_start_ns = 0;  // realtime of the last AcquisitionStart
-
-    // Control thread only.
-    bool has_controller = false;
-    sockaddr_in controller{};
-    std::int64_t controller_time_us = 0;
-
-    // Resend buffer: the packets of recent frames, and where the stream went.
-    std::mutex resend_mutex;
-    struct SentFrame {
-        std::uint16_t block_id;
-        std::vector<std::vector<std::uint8_t>> packets;  // by packet id
-    };
-    std::deque<SentFrame> sent;
-    sockaddr_in stream_destination{};
-
-    mutable std::mutex stats_mutex;
-    GvDeviceStats stats;
-
-    ~Impl() {
-        stop = true;
-        if (control.joinable()) control.join();
-        if (stream.joinable()) stream.join();
-        if (gvcp_fd >= 0) ::close(gvcp_fd);
-        if (gvsp_fd >= 0) ::close(gvsp_fd);
-        if (camera) g_object_unref(camera);
-    }
-
-    void run_control();
-    void handle(const std::uint8_t* packet, std::size_t size, const sockaddr_in& from);
-    void handle_resend(const std::uint8_t* payload, std::size_t size, std::uint8_t flags);
-    void run_stream();
-    void send_frame(const FrameRequest& request, std::uint32_t packet_size,
-                    const std::vector<std::uint8_t>& data, std::mt19937_64& loss_rng);
+// A GVCP command (GigE Vision 2.x command header: key, flags, command, length, request id) and
+// its payload, which lies inside the datagram received.
+struct GvcpCommand {
+    std::uint16_t command = 0;
+    std::uint16_t id = 0;
+    const std::uint8_t* payload = nullptr;
+    std::size_t length = 0;
 };
+
+// The acknowledges, one per command; the caller holds the camera's lock.
+std::vector<std::uint8_t> discovery_ack(ArvFakeCamera* camera, const GvcpCommand& c) {
+    auto ack = ack_header(0, kDiscoveryAck, kDiscoveryDataSize, c.id);
+    ack.resize(8 + kDiscoveryDataSize);
+    arv_fake_camera_read_memory(camera, 0, kDiscoveryDataSize, ack.data() + 8);
+    return ack;
+}
+
+std::vector<std::uint8_t> read_register_ack(ArvFakeCamera* camera, const GvcpCommand& c) {
+    if (c.length == 0 || c.length % 4 != 0)
+        return ack_header(kStatusInvalidParameter, kReadRegAck, 0, c.id);
+    auto ack = ack_header(0, kReadRegAck, c.length, c.id);
+    for (std::size_t i = 0; i < c.length; i += 4) {
+        const std::uint32_t address = get32(c.payload + i);
+        std::uint32_t value = 0;
+        arv_fake_camera_read_register(camera, address, &value);
+        // The resend buffer is ours: say so where clients look for it.
+        if (address == kGvcpCapabilityRegister)
+            value |= kCapabilityPacketResend | kCapabilityWriteMemory;
+        put32(ack, value);
+    }
+    return ack;
+}
+
+std::vector<std::uint8_t> write_register_ack(ArvFakeCamera* camera, const GvcpCommand& c,
+                                             bool write_access) {
+    if (!write_access) return ack_header(kStatusAccessDenied, kWriteRegAck, 0, c.id);
+    if (c.length == 0 || c.length % 8 != 0)
+        return ack_header(kStatusInvalidParameter, kWriteRegAck, 0, c.id);
+    std::uint32_t written = 0;
+    for (std::size_t i = 0; i < c.length; i += 8) {
+        arv_fake_camera_write_register(camera, get32(c.payload + i), get32(c.payload + i + 4));
+        ++written;
+    }
+    auto ack = ack_header(0, kWriteRegAck, 4, c.id);
+    put32(ack, written);
+    return ack;
+}
+
+std::vector<std::uint8_t> read_memory_ack(ArvFakeCamera* camera, const GvcpCommand& c) {
+    if (c.length < 8) return ack_header(kStatusInvalidParameter, kReadMemAck, 0, c.id);
+    const std::uint32_t address = get32(c.payload);
+    const std::uint32_t count = get32(c.payload + 4) & 0xffff;
+    if (count == 0 || count > kMaxReadMemory || count % 4 != 0)
+        return ack_header(kStatusInvalidParameter, kReadMemAck, 0, c.id);
+    auto ack = ack_header(0, kReadMemAck, 4 + count, c.id);
+    put32(ack, address);
+    ack.resize(ack.size() + count);
+    arv_fake_camera_read_memory(camera, address, count, ack.data() + 12);
+    return ack;
+}
+
+std::vector<std::uint8_t> write_memory_ack(ArvFakeCamera* camera, const GvcpCommand& c,
+                                           bool write_access) {
+    if (!write_access) return ack_header(kStatusAccessDenied, kWriteMemAck, 0, c.id);
+    if (c.length < 8) return ack_header(kStatusInvalidParameter, kWriteMemAck, 0, c.id);
+    const std::uint32_t address = get32(c.payload);
+    std::vector<std::uint8_t> data(c.payload + 4, c.payload + c.length);
+    arv_fake_camera_write_memory(camera, address, static_cast<std::uint32_t>(data.size()),
+                                 data.data());
+    auto ack = ack_header(0, kWriteMemAck, 4, c.id);
+    put32(ack, address);
+    return ack;
+}
+
+// The camera's answer to a command (other than PACKETRESEND); others are not implemented.
+std::vector<std::uint8_t> acknowledge(ArvFakeCamera* camera, const GvcpCommand& c,
+                                      bool write_access) {
+    switch (c.command) {
+        case kDiscoveryCmd:
+            return discovery_ack(camera, c);
+        case kReadRegCmd:
+            return read_register_ack(camera, c);
+        case kWriteRegCmd:
+            return write_register_ack(camera, c, write_access);
+        case kReadMemCmd:
+            return read_memory_ack(camera, c);
+        case kWriteMemCmd:
+            return write_memory_ack(camera, c, write_access);
+        default:
+            return ack_header(kStatusNotImplemented, static_cast<std::uint16_t>(c.command + 1), 0,
+                              c.id);
+    }
+}
+
+}  // namespace
 
 void GvDevice::Impl::run_control() {
     std::vector<std::uint8_t> buf(65536);
@@ -276,23 +169,33 @@ void GvDevice::Impl::run_control() {
 void GvDevice::Impl::handle(const std::uint8_t* packet, std::size_t size, const sockaddr_in& from) {
     if (size < 8 || packet[0] != kCommandKey) return;  // not a GVCP command: ignored, as devices do
     const std::uint8_t flags = packet[1];
-    const std::uint16_t command = get16(packet + 2);
-    const std::size_t length = get16(packet + 4);
-    const std::uint16_t id = get16(packet + 6);
-    if (8 + length > size) return;
-    const std::uint8_t* payload = packet + 8;
-    if (command == kPacketResendCmd) {  // no acknowledge (GigE Vision: PACKETRESEND has none)
-        handle_resend(payload, length, flags);
+    GvcpCommand c;
+    c.command = get16(packet + 2);
+    c.length = get16(packet + 4);
+    c.id = get16(packet + 6);
+    if (8 + c.length > size) return;
+    c.payload = packet + 8;
+    if (c.command == kPacketResendCmd) {  // no acknowledge (GigE Vision: PACKETRESEND has none)
+        handle_resend(c.payload, c.length, flags);
         return;
     }
 
-    std::vector<std::uint8_t> ack;
     std::lock_guard camera_lock(camera_mutex);
-    // Control channel privilege: the controller keeps it while it talks within the heartbeat
-    // timeout; others may read but not write. Its age on the monotonic clock: a step of the
-    // wall clock (a VM resumed, NTP) is no silence of the controller's.
     const std::int64_t now_us = g_get_monotonic_time();
     const bool acquiring_before = arv_fake_camera_get_acquisition_status(camera) != 0;
+    const bool write_access = controller_write_access(from, now_us);
+    const std::vector<std::uint8_t> ack = acknowledge(camera, c, write_access);
+    note_camera_changes(acquiring_before, from, now_us);
+    if ((flags & kFlagAckRequired) || c.command == kDiscoveryCmd)
+        ::sendto(gvcp_fd, ack.data(), ack.size(), 0, reinterpret_cast<const sockaddr*>(&from),
+                 sizeof from);
+}
+
+// Control channel privilege: the controller keeps it while it talks within the heartbeat
+// timeout; others may read but not write. Its age on the monotonic clock (`now_us`): a step of
+// the wall clock (a VM resumed, NTP) is no silence of the controller's. The caller holds
+// camera_mutex.
+bool GvDevice::Impl::controller_write_access(const sockaddr_in& from, std::int64_t now_us) {
     bool write_access = true;
     if (has_controller) {
         const auto timeout_ms = arv_fake_camera_get_heartbeat_timeout(camera);
@@ -305,85 +208,13 @@ void GvDevice::Impl::handle(const std::uint8_t* packet, std::size_t size, const 
             if (write_access) controller_time_us = now_us;
         }
     }
-    switch (command) {
-        case kDiscoveryCmd: {
-            ack = ack_header(0, kDiscoveryAck, kDiscoveryDataSize, id);
-            ack.resize(8 + kDiscoveryDataSize);
-            arv_fake_camera_read_memory(camera, 0, kDiscoveryDataSize, ack.data() + 8);
-            break;
-        }
-        case kReadRegCmd: {
-            if (length == 0 || length % 4 != 0) {
-                ack = ack_header(kStatusInvalidParameter, kReadRegAck, 0, id);
-                break;
-            }
-            ack = ack_header(0, kReadRegAck, length, id);
-            for (std::size_t i = 0; i < length; i += 4) {
-                const std::uint32_t address = get32(payload + i);
-                std::uint32_t value = 0;
-                arv_fake_camera_read_register(camera, address, &value);
-                // The resend buffer is ours: say so where clients look for it.
-                if (address == kGvcpCapabilityRegister)
-                    value |= kCapabilityPacketResend | kCapabilityWriteMemory;
-                put32(ack, value);
-            }
-            break;
-        }
-        case kWriteRegCmd: {
-            if (!write_access) {
-                ack = ack_header(kStatusAccessDenied, kWriteRegAck, 0, id);
-                break;
-            }
-            if (length == 0 || length % 8 != 0) {
-                ack = ack_header(kStatusInvalidParameter, kWriteRegAck, 0, id);
-                break;
-            }
-            std::uint32_t written = 0;
-            for (std::size_t i = 0; i < length; i += 8) {
-                arv_fake_camera_write_register(camera, get32(payload + i), get32(payload + i + 4));
-                ++written;
-            }
-            ack = ack_header(0, kWriteRegAck, 4, id);
-            put32(ack, written);
-            break;
-        }
-        case kReadMemCmd: {
-            if (length < 8) {
-                ack = ack_header(kStatusInvalidParameter, kReadMemAck, 0, id);
-                break;
-            }
-            const std::uint32_t address = get32(payload);
-            const std::uint32_t count = get32(payload + 4) & 0xffff;
-            if (count == 0 || count > kMaxReadMemory || count % 4 != 0) {
-                ack = ack_header(kStatusInvalidParameter, kReadMemAck, 0, id);
-                break;
-            }
-            ack = ack_header(0, kReadMemAck, 4 + count, id);
-            put32(ack, address);
-            ack.resize(ack.size() + count);
-            arv_fake_camera_read_memory(camera, address, count, ack.data() + 12);
-            break;
-        }
-        case kWriteMemCmd: {
-            if (!write_access) {
-                ack = ack_header(kStatusAccessDenied, kWriteMemAck, 0, id);
-                break;
-            }
-            if (length < 8) {
-                ack = ack_header(kStatusInvalidParameter, kWriteMemAck, 0, id);
-                break;
-            }
-            const std::uint32_t address = get32(payload);
-            std::vector<std::uint8_t> data(payload + 4, payload + length);
-            arv_fake_camera_write_memory(camera, address, static_cast<std::uint32_t>(data.size()),
-                                         data.data());
-            ack = ack_header(0, kWriteMemAck, 4, id);
-            put32(ack, address);
-            break;
-        }
-        default:
-            ack = ack_header(kStatusNotImplemented, static_cast<std::uint16_t>(command + 1), 0, id);
-    }
+    return write_access;
+}
+
+// After a command from `from`: an AcquisitionStart it made, and the controller it made or
+// unmade. The caller holds camera_mutex.
+void GvDevice::Impl::note_camera_changes(bool acquiring_before, const sockaddr_in& from,
+                                         std::int64_t now_us) {
     if (!acquiring_before && arv_fake_camera_get_acquisition_status(camera) != 0) {
         ++acquisition_starts;
         acquisition_start_ns = real_time_us() * 1000;
@@ -399,9 +230,6 @@ void GvDevice::Impl::handle(const std::uint8_t* packet, std::size_t size, const 
     } else if (has_controller && !privileged) {
         has_controller = false;
     }
-    if ((flags & kFlagAckRequired) || command == kDiscoveryCmd)
-        ::sendto(gvcp_fd, ack.data(), ack.size(), 0, reinterpret_cast<const sockaddr*>(&from),
-                 sizeof from);
 }
 
 void GvDevice::Impl::handle_resend(const std::uint8_t* payload, std::size_t size,
@@ -441,181 +269,6 @@ void GvDevice::Impl::handle_resend(const std::uint8_t* payload, std::size_t size
     ++stats.resend_requests;
     stats.resent += resent;
     stats.resend_unavailable += unavailable;
-}
-
-void GvDevice::Impl::run_stream() {
-    std::mt19937_64 loss_rng(config.loss_seed);
-    std::vector<std::uint8_t> data;
-    std::uint64_t acquisition = 0;
-    std::int64_t frame_in_acquisition = 0;
-    std::uint32_t frame_id = 0;
-    bool streaming_before = false;
-    std::uint64_t starts_seen = 0;
-    std::int64_t next_us = 0;  // this frame's time, µs
-    while (!stop) {
-        guint64 aligned_us = 0;  // the fake camera's next frame time on its period grid
-        std::int64_t period_us = 0;
-        bool streaming = false, restarted = false;
-        {
-            std::lock_guard lock(camera_mutex);
-            streaming = arv_fake_camera_get_control_channel_privilege(camera) != 0 &&
-                        arv_fake_camera_get_acquisition_status(camera) != 0;
-            restarted = starts_seen != acquisition_starts;
-            starts_seen = acquisition_starts;
-            if (streaming) {
-                arv_fake_camera_get_sleep_time_for_next_frame(camera, &aligned_us);
-                std::uint32_t p = 0;
-                arv_fake_camera_read_register(
-                    camera, ARV_FAKE_CAMERA_REGISTER_ACQUISITION_FRAME_PERIOD_US, &p);
-                period_us = p > 0 ? p : 1'000'000;
-            }
-        }
-        if (!streaming) {
-            streaming_before = false;
-            std::this_thread::sleep_for(std::chrono::milliseconds(5));
-            continue;
-        }
-        // Frames follow each other at the period from the first one, like exposures of a
-        // camera. One rendered late goes out late with its own timestamp (a camera's frame
-        // buffer); only when a second behind does the device skip ahead, and count it.
-        if (!streaming_before || restarted) {
-            ++acquisition;
-            frame_in_acquisition = 0;
-            streaming_before = true;
-            next_us =
-                config.renderer_paces ? real_time_us() : static_cast<std::int64_t>(aligned_us);
-        } else if (config.renderer_paces) {
-            next_us = real_time_us();
-        } else {
-            next_us += period_us;
-            if (real_time_us() - next_us > 1'000'000) {
-                const std::int64_t behind =
-                    (static_cast<std::int64_t>(aligned_us) - next_us) / period_us;
-                next_us = static_cast<std::int64_t>(aligned_us);
-                std::lock_guard lock(stats_mutex);
-                stats.skipped += static_cast<std::uint64_t>(std::max<std::int64_t>(0, behind));
-            }
-        }
-        // Until the frame's time, in slices so that stop() is prompt.
-        while (!stop && real_time_us() < next_us)
-            std::this_thread::sleep_for(
-                std::chrono::microseconds(std::min<std::int64_t>(20000, next_us - real_time_us())));
-        if (stop) break;
-
-        FrameRequest req;
-        std::uint32_t packet_size = 0;
-        {
-            std::lock_guard lock(camera_mutex);
-            // Stopped, or stopped and started again while this frame waited: not sent; a new
-            // acquisition begins with the next turn.
-            if (arv_fake_camera_get_acquisition_status(camera) == 0 ||
-                starts_seen != acquisition_starts)
-                continue;
-            const bool fire = arv_fake_camera_is_in_free_running_mode(camera) ||
-                              (arv_fake_camera_is_in_software_trigger_mode(camera) &&
-                               arv_fake_camera_check_and_acknowledge_software_trigger(camera));
-            if (!fire) continue;
-            auto reg = [&](std::uint32_t address) {
-                std::uint32_t v = 0;
-                arv_fake_camera_read_register(camera, address, &v);
-                return v;
-            };
-            req.width = static_cast<int>(reg(ARV_FAKE_CAMERA_REGISTER_WIDTH));
-            req.height = static_cast<int>(reg(ARV_FAKE_CAMERA_REGISTER_HEIGHT));
-            req.offset_x = static_cast<int>(reg(ARV_FAKE_CAMERA_REGISTER_X_OFFSET));
-            req.offset_y = static_cast<int>(reg(ARV_FAKE_CAMERA_REGISTER_Y_OFFSET));
-            req.pixel_format = reg(ARV_FAKE_CAMERA_REGISTER_PIXEL_FORMAT);
-            req.exposure_us = reg(ARV_FAKE_CAMERA_REGISTER_EXPOSURE_TIME_US);
-            req.acquisition_start_ns = acquisition_start_ns;
-            packet_size = reg(kStreamPacketSizeRegister) & 0xffff;
-            GSocketAddress* destination = arv_fake_camera_get_stream_address(camera);
-            sockaddr_in native{};
-            const bool ok = destination && g_socket_address_to_native(destination, &native,
-                                                                      sizeof native, nullptr);
-            if (destination) g_object_unref(destination);
-            if (!ok) continue;
-            std::lock_guard resend_lock(resend_mutex);
-            stream_destination = native;
-        }
-        req.bytes_per_pixel =
-            static_cast<int>(ARV_PIXEL_FORMAT_BIT_PER_PIXEL(req.pixel_format) / 8);
-        const std::uint32_t previous_id = frame_id;
-        frame_id = frame_id % 65535 + 1;  // 16-bit block ids; 0 is reserved
-        req.frame_id = frame_id;
-        req.timestamp_ns = next_us * 1000;
-        req.acquisition = acquisition;
-        req.frame_in_acquisition = frame_in_acquisition++;
-        data.assign(static_cast<std::size_t>(req.width) * static_cast<std::size_t>(req.height) *
-                        static_cast<std::size_t>(std::max(1, req.bytes_per_pixel)),
-                    0);
-        if (renderer) renderer(req, data);
-        if (!req.send) {  // no frame: its block id is not used
-            frame_id = previous_id;
-            continue;
-        }
-        {
-            // Stopped, or stopped and started again, while it was rendered: dropped, as a
-            // camera drops the frame in progress (it belongs to no acquisition now).
-            std::lock_guard lock(camera_mutex);
-            if (arv_fake_camera_get_acquisition_status(camera) == 0 ||
-                starts_seen != acquisition_starts) {
-                std::lock_guard stats_lock(stats_mutex);
-                ++stats.stopped_while_rendered;
-                continue;
-            }
-        }
-        if (const std::int64_t late_us = real_time_us() - next_us - period_us; late_us > 0) {
-            std::lock_guard lock(stats_mutex);
-            ++stats.late;
-            stats.max_late_us = std::max(stats.max_late_us, late_us);
-        }
-        const bool lose_start =
-            req.frame_in_acquisition < config.lose_scan_start &&
-            (config.lose_scan_start_count == 0 ||
-             acquisition <= static_cast<std::uint64_t>(config.lose_scan_start_count));
-        if (lose_start) {
-            std::lock_guard lock(stats_mutex);
-            ++stats.start_frames_lost;
-            continue;
-        }
-        send_frame(req, packet_size, data, loss_rng);
-    }
-}
-
-void GvDevice::Impl::send_frame(const FrameRequest& req, std::uint32_t packet_size,
-                                const std::vector<std::uint8_t>& data, std::mt19937_64& loss_rng) {
-    if (packet_size < 576 || packet_size > 16000) packet_size = 1500;
-    const auto block = static_cast<std::uint16_t>(req.frame_id);
-    SentFrame frame{block, config.multipart_parts >= 2
-                               ? multipart_packets(req, packet_size, data, config.multipart_parts)
-                               : image_packets(req, packet_size, data)};
-
-    std::uint64_t dropped = 0;
-    std::bernoulli_distribution drop(config.packet_loss);
-    sockaddr_in destination{};
-    {
-        std::lock_guard lock(resend_mutex);
-        destination = stream_destination;
-    }
-    for (const auto& p : frame.packets) {
-        if (config.packet_loss > 0 && drop(loss_rng)) {
-            ++dropped;
-            continue;
-        }
-        ::sendto(gvsp_fd, p.data(), p.size(), 0, reinterpret_cast<const sockaddr*>(&destination),
-                 sizeof destination);
-    }
-    const std::uint64_t n_packets = frame.packets.size();
-    {
-        std::lock_guard lock(resend_mutex);
-        sent.push_back(std::move(frame));
-        while (sent.size() > static_cast<std::size_t>(std::max(1, config.resend_buffer_frames)))
-            sent.pop_front();
-    }
-    std::lock_guard lock(stats_mutex);
-    ++stats.frames;
-    stats.packets += n_packets;
-    stats.dropped += dropped;
 }
 
 GvDevice::GvDevice(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}

@@ -72,6 +72,51 @@ core::Result<void> write_part_truth(const VirtualCellConfig& c, const LoadedPart
     return sim::write_truth(part.scene.truth(), c.truth_dir / name);
 }
 
+// The face the sensor starts at: its number on the axis (1-based; the last of that name), 0 if
+// the cell has none of that name.
+int face_number(const VirtualCellConfig& c) {
+    int number = 0;
+    for (std::size_t i = 0; i < c.cell.faces.size(); ++i)
+        if (c.cell.faces[i].name == c.face) number = static_cast<int>(i) + 1;
+    return number;
+}
+
+// The settings the virtual cell cannot run with, the first one found.
+core::Result<void> check_config(const VirtualCellConfig& c) {
+    if (c.mode != "image" && c.mode != "peaks")
+        return core::make_error("virtual cell: mode '" + c.mode + "' is not image or peaks");
+    if (face_number(c) == 0)
+        return core::make_error("virtual cell: no face '" + c.face + "' in the cell");
+    if (c.mode == "peaks")
+        if (auto ok = acquire::check_peak_format(c.peaks); !ok) return ok.error();
+    if (c.device.multipart_parts >= 2 &&
+        (c.mode != "peaks" || c.device.multipart_parts != c.peaks.rows_per_profile()))
+        return core::make_error(
+            "virtual cell: multi-part frames need peaks mode with one part per row kind (" +
+            std::to_string(c.peaks.rows_per_profile()) + ")");
+    if (!(c.speed_mm_s > 0)) return core::make_error("virtual cell: speed_mm_s must be > 0");
+    if (!(c.cell.accel.rate_hz > 0))
+        return core::make_error("virtual cell: accelerometer rate must be > 0");
+    return {};
+}
+
+// A bad part that cannot be built (an unknown feature, a die shift on a sharp part) is an error
+// now, not a load that times out later.
+core::Result<void> check_bad_parts(const VirtualCellConfig& c) {
+    for (const auto& [n, bad] : c.bad_parts) {
+        if (c.replay) break;  // no part is simulated
+        if (n < 1) return core::make_error("virtual cell: bad part " + std::to_string(n) + " < 1");
+        if (c.master_parts.contains(n))
+            return core::make_error("virtual cell: part " + std::to_string(n) +
+                                    " is the master, which is never bad");
+        std::mt19937_64 check_rng;
+        if (auto part = build_part(c, n, check_rng); !part)
+            return core::make_error("virtual cell: bad part " + std::to_string(n) + ": " +
+                                    part.error().message);
+    }
+    return {};
+}
+
 }  // namespace
 
 sim::SimOptions part_options(const sim::SimOptions& base, int n) {
@@ -174,12 +219,57 @@ struct VirtualCell::Impl {
         part = std::move(p);
     }
 
+    core::Result<void> load_first_part(std::mt19937_64& rng);
+    core::Result<void> start_axis(int initial_face);
     void request_part(int n);  // the axis thread: returns at once
     void run_loader();
     void render(FrameRequest& req, std::span<std::uint8_t> data);
     void run_accel();
     void run_replay_accel();
 };
+
+// Part 1 on the support before the renderer runs (`rng` goes on to seed the scan), or, for a
+// replay, the recording's player.
+core::Result<void> VirtualCell::Impl::load_first_part(std::mt19937_64& rng) {
+    VirtualCellConfig& c = config;
+    if (c.replay) {
+        auto made = make_player(c);
+        if (!made) return made.error();
+        player = std::move(*made);
+        c.device.renderer_paces = true;
+    } else {
+        auto first = build_part(c, 1, rng);
+        if (!first) return first.error();
+        if (auto ok = write_part_truth(c, **first); !ok) return ok.error();
+        part = std::move(*first);  // before the renderer runs
+    }
+    return {};
+}
+
+// The robot/axis controller's Modbus server, at face `initial_face` (1-based).
+core::Result<void> VirtualCell::Impl::start_axis(int initial_face) {
+    AxisServerConfig ac;
+    ac.bind = config.axis_bind;
+    ac.port = config.axis_port;
+    ac.n_faces = static_cast<int>(config.cell.faces.size());
+    ac.initial_face = initial_face;
+    ac.move_time_s = config.axis_move_s;
+    Impl* raw = this;
+    auto started = AxisServer::start(
+        ac,
+        [raw](int f) {
+            const auto& faces = raw->config.cell.faces;
+            raw->face = &faces[static_cast<std::size_t>(f - 1)];
+            detail::log().info("axis: at face {} ({})", f,
+                               faces[static_cast<std::size_t>(f - 1)].name);
+        },
+        [raw](int n) { raw->request_part(n); });
+    if (!started) return started.error();
+    std::lock_guard lock(part_mutex);  // its thread may already be asking for a part
+    axis = std::move(*started);
+    axis->set_part_loaded(loaded);
+    return {};
+}
 
 void VirtualCell::Impl::request_part(int n) {
     if (player) {  // a replay has one part, the recording's: it is there at once
@@ -365,52 +455,12 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
     auto impl = std::make_unique<Impl>();
     impl->config = std::move(config);
     VirtualCellConfig& c = impl->config;
-    if (c.mode != "image" && c.mode != "peaks")
-        return core::make_error("virtual cell: mode '" + c.mode + "' is not image or peaks");
-    int initial = 0;
-    for (std::size_t i = 0; i < c.cell.faces.size(); ++i)
-        if (c.cell.faces[i].name == c.face) {
-            impl->face = &c.cell.faces[i];
-            initial = static_cast<int>(i) + 1;
-        }
-    if (!impl->face.load())
-        return core::make_error("virtual cell: no face '" + c.face + "' in the cell");
-    if (c.mode == "peaks")
-        if (auto ok = acquire::check_peak_format(c.peaks); !ok) return ok.error();
-    if (c.device.multipart_parts >= 2 &&
-        (c.mode != "peaks" || c.device.multipart_parts != c.peaks.rows_per_profile()))
-        return core::make_error(
-            "virtual cell: multi-part frames need peaks mode with one part per row kind (" +
-            std::to_string(c.peaks.rows_per_profile()) + ")");
-    if (!(c.speed_mm_s > 0)) return core::make_error("virtual cell: speed_mm_s must be > 0");
-    if (!(c.cell.accel.rate_hz > 0))
-        return core::make_error("virtual cell: accelerometer rate must be > 0");
-
-    // A bad part that cannot be built (an unknown feature, a die shift on a sharp part) is an
-    // error now, not a load that times out later.
-    for (const auto& [n, bad] : c.bad_parts) {
-        if (c.replay) break;  // no part is simulated
-        if (n < 1) return core::make_error("virtual cell: bad part " + std::to_string(n) + " < 1");
-        if (c.master_parts.contains(n))
-            return core::make_error("virtual cell: part " + std::to_string(n) +
-                                    " is the master, which is never bad");
-        std::mt19937_64 check_rng;
-        if (auto part = build_part(c, n, check_rng); !part)
-            return core::make_error("virtual cell: bad part " + std::to_string(n) + ": " +
-                                    part.error().message);
-    }
+    if (auto ok = check_config(c); !ok) return ok.error();
+    const int initial = face_number(c);
+    impl->face = &c.cell.faces[static_cast<std::size_t>(initial - 1)];
+    if (auto ok = check_bad_parts(c); !ok) return ok.error();
     std::mt19937_64 rng;
-    if (c.replay) {
-        auto player = make_player(c);
-        if (!player) return player.error();
-        impl->player = std::move(*player);
-        c.device.renderer_paces = true;
-    } else {
-        auto first = build_part(c, 1, rng);
-        if (!first) return first.error();
-        if (auto ok = write_part_truth(c, **first); !ok) return ok.error();
-        impl->part = std::move(*first);  // before the renderer runs
-    }
+    if (auto ok = impl->load_first_part(rng); !ok) return ok.error();
     impl->loaded = 1;
     std::mt19937_64 scan_rng(c.part.scan_seed ? *c.part.scan_seed : rng());
     impl->vibration.emplace(c.cell.vibration, 0.0, kServeHorizonS, scan_rng);
@@ -437,27 +487,8 @@ core::Result<std::unique_ptr<VirtualCell>> VirtualCell::start(VirtualCellConfig 
     });
     if (!device) return device.error();
     impl->device = std::move(*device);
-    if (c.axis_port >= 0) {
-        AxisServerConfig ac;
-        ac.bind = c.axis_bind;
-        ac.port = c.axis_port;
-        ac.n_faces = static_cast<int>(c.cell.faces.size());
-        ac.initial_face = initial;
-        ac.move_time_s = c.axis_move_s;
-        auto axis = AxisServer::start(
-            ac,
-            [raw](int f) {
-                const auto& faces = raw->config.cell.faces;
-                raw->face = &faces[static_cast<std::size_t>(f - 1)];
-                detail::log().info("axis: at face {} ({})", f,
-                                   faces[static_cast<std::size_t>(f - 1)].name);
-            },
-            [raw](int n) { raw->request_part(n); });
-        if (!axis) return axis.error();
-        std::lock_guard lock(impl->part_mutex);  // its thread may already be asking for a part
-        impl->axis = std::move(*axis);
-        impl->axis->set_part_loaded(impl->loaded);
-    }
+    if (c.axis_port >= 0)
+        if (auto ok = impl->start_axis(initial); !ok) return ok.error();
     impl->loader_thread = std::thread([raw] { raw->run_loader(); });
     if (impl->sender) impl->accel_thread = std::thread([raw] { raw->run_accel(); });
     detail::log().info("virtual cell: face {}, {} mode, {} mm/s, accelerometer {}, pyrometer {}",

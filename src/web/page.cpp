@@ -1,12 +1,12 @@
 #include <nlohmann/json.hpp>
 
-#include "hotgauge/report/html.hpp"
+#include "hotgauge/core/text.hpp"
 #include "hotgauge/web/cell_view.hpp"
 
 namespace hotgauge::web {
 namespace {
 
-using report::escape;
+using core::html_escape;
 
 constexpr const char* kStyle = R"(<style>
 body{font-family:sans-serif;margin:1em;background:#fafafa;color:#222}
@@ -21,20 +21,20 @@ img{border:1px solid #888;max-width:16em;height:auto;image-rendering:pixelated}
 </style>)";
 
 std::string verdict_cell(const std::string& verdict) {
-    return "<td class=\"" + escape(verdict) + "\">" + escape(verdict) + "</td>";
+    return "<td class=\"" + html_escape(verdict) + "\">" + html_escape(verdict) + "</td>";
 }
 
 std::string devices_html(const CellView& v) {
     std::string h = "<h2>Devices</h2>";
     if (v.health_updated.empty()) return h + "<p id=\"health\">not reported yet</p>";
-    h += "<p id=\"health\">as of " + escape(v.health_updated) +
+    h += "<p id=\"health\">as of " + html_escape(v.health_updated) +
          "</p><table id=\"devices\"><tr><th>device</th><th>state</th><th>detail</th></tr>";
     for (const auto& d : v.devices) {
         const char* state = !d.configured ? "not configured" : d.ok ? "ok" : "FAULT";
         const char* cls = !d.configured ? "unconfigured" : d.ok ? "OK" : "bad";
         h += "<tr class=\"device\" data-ok=\"" + std::string(d.ok ? "1" : "0") + "\"><td>" +
-             escape(d.name) + "</td><td class=\"" + cls + "\">" + state + "</td><td>" +
-             escape(d.detail) + "</td></tr>";
+             html_escape(d.name) + "</td><td class=\"" + cls + "\">" + state + "</td><td>" +
+             html_escape(d.detail) + "</td></tr>";
     }
     return h + "</table>";
 }
@@ -44,11 +44,12 @@ std::string devices_html(const CellView& v) {
 std::string features_html(const ResultView& r) {
     std::string h;
     for (const auto& f : r.features)
-        h += "<span class=\"feature " + escape(f.verdict) + "\" data-name=\"" + escape(f.name) +
-             "\" data-verdict=\"" + escape(f.verdict) + "\">" + escape(f.name) + " " +
-             (f.value_mm ? report::fixed(*f.value_mm, 3) : std::string("—")) +
-             (f.verdict == "OK" ? "" : " " + escape(f.verdict)) +
-             (f.reason.empty() ? "" : ": " + escape(f.reason)) + "</span> ";
+        h += "<span class=\"feature " + html_escape(f.verdict) + "\" data-name=\"" +
+             html_escape(f.name) + "\" data-verdict=\"" + html_escape(f.verdict) + "\">" +
+             html_escape(f.name) + " " +
+             (f.value_mm ? core::fixed(*f.value_mm, 3) : std::string("—")) +
+             (f.verdict == "OK" ? "" : " " + html_escape(f.verdict)) +
+             (f.reason.empty() ? "" : ": " + html_escape(f.reason)) + "</span> ";
     return h;
 }
 
@@ -59,11 +60,11 @@ std::string results_html(const CellView& v) {
          "<th>verdict</th><th>PLC got</th><th>features</th></tr>";
     for (const auto& r : v.results)
         h += "<tr class=\"result\" data-sequence=\"" + std::to_string(r.sequence) +
-             "\" data-part=\"" + escape(r.part_id) + "\" data-verdict=\"" + escape(r.verdict) +
-             "\"><td>" + std::to_string(r.sequence) + "</td><td>" + escape(r.time) + "</td><td>" +
-             escape(r.part_id) + "</td><td>" + escape(r.recipe) + "</td>" +
-             verdict_cell(r.verdict) + "<td>" + escape(r.outcome) + "</td><td>" + features_html(r) +
-             "</td></tr>";
+             "\" data-part=\"" + html_escape(r.part_id) + "\" data-verdict=\"" +
+             html_escape(r.verdict) + "\"><td>" + std::to_string(r.sequence) + "</td><td>" +
+             html_escape(r.time) + "</td><td>" + html_escape(r.part_id) + "</td><td>" +
+             html_escape(r.recipe) + "</td>" + verdict_cell(r.verdict) + "<td>" +
+             html_escape(r.outcome) + "</td><td>" + features_html(r) + "</td></tr>";
     return h + "</table>";
 }
 
@@ -71,13 +72,13 @@ std::string pictures_html(const CellView& v) {
     std::string h = "<h2>Last part's range images</h2>";
     if (!v.pictures_sequence) return h + "<p>no part scanned since the start</p>";
     h += "<p id=\"pictures\" data-sequence=\"" + std::to_string(*v.pictures_sequence) + "\">part " +
-         escape(v.pictures_part_id) + ", seq " + std::to_string(*v.pictures_sequence) +
-         " (drawn in " + report::fixed(v.pictures_ms, 0) + " ms)</p>";
+         html_escape(v.pictures_part_id) + ", seq " + std::to_string(*v.pictures_sequence) +
+         " (drawn in " + core::fixed(v.pictures_ms, 0) + " ms)</p>";
     for (const auto& p : v.pictures)
-        h += "<figure><img class=\"range\" alt=\"" + escape(p.face) + "\" src=\"" +
-             escape(picture_href(*v.pictures_sequence, p.face)) + "\" width=\"" +
+        h += "<figure><img class=\"range\" alt=\"" + html_escape(p.face) + "\" src=\"" +
+             html_escape(picture_href(*v.pictures_sequence, p.face)) + "\" width=\"" +
              std::to_string(p.width) + "\" height=\"" + std::to_string(p.height) +
-             "\"><figcaption>" + escape(p.face) + "</figcaption></figure>";
+             "\"><figcaption>" + html_escape(p.face) + "</figcaption></figure>";
     return h;
 }
 
@@ -87,14 +88,14 @@ std::string events_html(const CellView& v) {
     h += "<table id=\"events\">";
     for (const auto& e : v.events)
         h += "<tr class=\"" + std::string(e.fault ? "fault" : "warning") + "\"><td>" +
-             escape(e.time) + "</td><td>" + escape(e.text) + "</td></tr>";
+             html_escape(e.time) + "</td><td>" + html_escape(e.text) + "</td></tr>";
     return h + "</table>";
 }
 
 std::string files_html(const CellView& v) {
     std::string h = "<h2>Results files</h2><ul id=\"files\">";
     for (const auto& l : v.files)
-        h += "<li><a href=\"" + escape(l.href) + "\">" + escape(l.label) + "</a></li>";
+        h += "<li><a href=\"" + html_escape(l.href) + "\">" + html_escape(l.label) + "</a></li>";
     return h + "</ul>";
 }
 
@@ -107,11 +108,12 @@ std::string picture_href(std::uint64_t sequence, const std::string& face) {
 std::string render_status_page(const CellView& v) {
     return "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\">"
            "<meta http-equiv=\"refresh\" content=\"" +
-           std::to_string(v.refresh_s) + "\"><title>hotgauged: " + escape(v.state) + "</title>" +
-           kStyle + "</head><body><h1>hotgauged</h1><table><tr><th>daemon</th>" +
-           "<td id=\"state\">" + escape(v.state) + "</td></tr><tr><th>PLC</th><td id=\"plc\">" +
-           escape(v.plc_state) + "</td></tr></table>" + pictures_html(v) + results_html(v) +
-           devices_html(v) + events_html(v) + files_html(v) +
+           std::to_string(v.refresh_s) + "\"><title>hotgauged: " + html_escape(v.state) +
+           "</title>" + kStyle + "</head><body><h1>hotgauged</h1><table><tr><th>daemon</th>" +
+           "<td id=\"state\">" + html_escape(v.state) +
+           "</td></tr><tr><th>PLC</th><td id=\"plc\">" + html_escape(v.plc_state) +
+           "</td></tr></table>" + pictures_html(v) + results_html(v) + devices_html(v) +
+           events_html(v) + files_html(v) +
            "<p><a href=\"/status.json\">status.json</a> · read-only; reloads every " +
            std::to_string(v.refresh_s) + " s</p></body></html>\n";
 }

@@ -10,7 +10,7 @@
 #include <mutex>
 #include <thread>
 
-#include "hotgauge/report/html.hpp"
+#include "hotgauge/core/text.hpp"
 
 namespace hotgauge::web {
 namespace {
@@ -97,10 +97,10 @@ std::string listing(const std::string& url, const fs::path& dir) {
         names.push_back(e.path().filename().string() + (e.is_directory(ec) ? "/" : ""));
     std::sort(names.begin(), names.end());
     std::string h = "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>" +
-                    report::escape(url) + "</title></head><body><h1>" + report::escape(url) +
+                    core::html_escape(url) + "</title></head><body><h1>" + core::html_escape(url) +
                     "</h1><ul>";
     for (const auto& n : names)
-        h += "<li><a href=\"" + report::escape(n) + "\">" + report::escape(n) + "</a></li>";
+        h += "<li><a href=\"" + core::html_escape(n) + "\">" + core::html_escape(n) + "</a></li>";
     return h + "</ul></body></html>\n";
 }
 

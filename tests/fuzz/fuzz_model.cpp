@@ -1,4 +1,4 @@
-// Fuzzes io::parse_model (PPF model files .hgm, docs/model-file.md), the file named fuzz/in.hgm.
+// Fuzzes model::parse_model (PPF model files .hgm, docs/model-file.md), the file named fuzz/in.hgm.
 //
 // Input: one flag byte, then the file. The file ends in a checksum that random edits would
 // almost never match, so when the flag's bit 0 is set the harness reseals the file as a writer
@@ -13,7 +13,7 @@
 
 #include "fuzz_util.hpp"
 #include "hotgauge/io/checksum.hpp"
-#include "hotgauge/io/model_io.hpp"
+#include "hotgauge/model/model_io.hpp"
 
 using namespace hotgauge;
 
@@ -37,13 +37,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         put_le64(file.data() + end, io::fnv1a64(file.data(), end));
     }
     static const auto path = fuzz::kDir / "in.hgm";
-    auto m = fuzz::no_throw("parse_model", [&] { return io::parse_model(file, path); });
+    auto m = fuzz::no_throw("parse_model", [&] { return model::parse_model(file, path); });
     if (!m) {
         fuzz::check_error_names(m.error(), path);
         return 0;
     }
     fuzz::check(m->validate().ok(), "parse_model returned an invalid model");
-    auto written = fuzz::no_throw("model_bytes", [&] { return io::model_bytes(*m, path); });
+    auto written = fuzz::no_throw("model_bytes", [&] { return model::model_bytes(*m, path); });
     fuzz::check(written.ok(), "model_bytes refused a model parse_model accepted");
     fuzz::check(*written == file, "model_bytes gave other bytes than the file read");
     return 0;

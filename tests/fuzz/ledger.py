@@ -37,8 +37,9 @@ READERS = {
                                          "src/plant/mqtt.cpp"],
     "fuzz_results": ["src/results/read_back.cpp", "include/hotgauge/results/read_back.hpp",
                      "src/report/lot_report.cpp", "src/report/lot_html.cpp", "src/report/aqdef.cpp",
-                     "src/report/html.cpp"],
-    "fuzz_model": ["src/io/model_io.cpp", "include/hotgauge/io/model_io.hpp", "src/match/model.cpp",
+                     "src/report/html.cpp", "include/hotgauge/report/html.hpp",
+                     "src/core/text.cpp", "include/hotgauge/core/text.hpp"],
+    "fuzz_model": ["src/model/model_io.cpp", "include/hotgauge/model/model_io.hpp", "src/match/model.cpp",
                    "include/hotgauge/match/model.hpp", "include/hotgauge/io/checksum.hpp"],
     "fuzz_modbus": ["src/plc/modbus_tcp.cpp", "include/hotgauge/plc/modbus_tcp.hpp"],
 }

@@ -2,7 +2,7 @@
 """Writes the seed corpora of tests/fuzz/corpus/ (tests/fuzz/README.md): small valid and
 near-valid inputs for each harness. Run from the repository root; the output is committed, so this
 runs only when the seeds should change. The model seeds (fuzz_model) are not made here: they are
-io::write_model files of match::model_from_recipe(hub-a, sampling 40 mm, 4 angle and 8 alpha
+model::write_model files of match::model_from_recipe(hub-a, sampling 40 mm, 4 angle and 8 alpha
 bins) and of model_from_samples (a 6x6 plate, 8 mm), behind fuzz_model.cpp's flag byte."""
 import os
 import struct

@@ -15,19 +15,18 @@
 namespace hotgauge::acquire {
 
 struct ScanConfig {
-    std::string face = "top";
+    // The face scanned: its name and geometry (a calibration's: calib::scan_config). The
+    // positions are the true travel, speed × travel_scale × (t − t of the first profile).
+    core::FaceGeometry face{.name = "top"};
+    bool geometry_from_calibration = false;  // the recording says so (core::FaceScan)
     std::string frame_mode = "image";  // image: a picture of the stripe; peaks: profile frames
     StripeConfig stripe;
     PeakFormat peaks;
     int offset_x_px = 0, offset_y_px = 0;  // the camera region's offset (full-sensor pixels)
-    // Scan motion: a constant-velocity axis, position = speed × (t − t of the first profile).
-    double speed_mm_s = 200.0;
+    double speed_mm_s = 200.0;             // the axis's commanded speed (constant velocity)
     // peaks mode: time between the profiles bundled in one frame (the line period), s.
     double line_period_s = 1e-3;
     std::int64_t clock_offset_ns = 0;  // added to camera timestamps: camera → accelerometer clock
-    Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();
-    Eigen::Vector3d scan_direction = Eigen::Vector3d::UnitY();
-    Eigen::Matrix3d R_camera_accel = Eigen::Matrix3d::Identity();
 };
 
 // What became of the frames and points; goes into the recording's summary and the logs.
@@ -48,6 +47,7 @@ class ScanBuilder {
     core::FaceScan take();
 
   private:
+    void start_face();
     void refuse(const std::string& why);
     void add_profile(const std::vector<StripePoint>& points, std::size_t first, int width,
                      std::int64_t t_ns);

@@ -114,16 +114,29 @@ struct CalibrationFit {
 core::Result<CalibrationFit> fit_calibrated_model(std::span<const CalibrationSample> samples,
                                                   const CalibrationOptions& options);
 
-// The simulator's sensor (sim::SensorConfig: 2048 rays, 0.2 mm pitch at 890 mm, range 600–1200
-// mm, imager 300 mm from the laser along y) on a Photonfocus MV1-D2048-3D03 imager (2048 × 1088,
-// 5.5 µm): a0 and α from the baseline and standoff, b0 and v0 such that rows 0 and height − 1
-// see the range's ends, β from Eq. 1.
-struct DirectBeamDesign {
-    double standoff_mm = 890.0;
-    double pitch_mm = 0.2;  // ray spacing at the standoff; one ray per column
-    double min_range_mm = 600.0, max_range_mm = 1200.0;
-    double baseline_mm = 300.0;  // lens centre from the laser, along camera y
-    int width_px = 2048, height_px = 1088;
+// A line-laser head as designed: the laser fan in the camera's y = 0 plane from the camera
+// origin, ray i at x_i = (i − (width − 1)/2)·pitch on the plane z = standoff, the imager
+// `baseline_mm` beside the laser origin along the camera's y. The one place the design numbers
+// live (paper §3.3: 2048 rays, 0.2 mm at 890 mm, range 600–1200 mm, 300 mm baseline): the
+// simulator's sensor (sim::SensorConfig), the calibration's model (calib::SensorModel) and the
+// direct-beam triangulation (DirectBeamDesign) all hold one.
+struct SensorDesign {
+    int width = 2048;             // rays, one per imager column
+    double pitch_mm = 0.2;        // ray spacing at the standoff
+    double standoff_mm = 890.0;   // lens working distance
+    double min_range_mm = 600.0;  // measuring range along z_camera
+    double max_range_mm = 1200.0;
+    double baseline_mm = 300.0;  // imager centre from the laser origin, along camera y
+
+    SensorDesign& design() { return *this; }
+    const SensorDesign& design() const { return *this; }
+};
+
+// The design on a Photonfocus MV1-D2048-3D03 imager (2048 × 1088, 5.5 µm): a0 and α from the
+// baseline and standoff, b0 and v0 such that rows 0 and height − 1 see the range's ends, β from
+// Eq. 1.
+struct DirectBeamDesign : SensorDesign {
+    int height_px = 1088;
     double pixel_size_mm = 0.0055;
 };
 core::Result<DirectBeamParams> design_direct_beam(const DirectBeamDesign& design);

@@ -61,8 +61,8 @@ struct ResidualMap {
 };
 
 struct FaceAlignment {
-    FaceGeometry geometry;  // R_camera_accel as recorded (estimate_accel_mount measures it)
-    double rms_mm = 0.0;    // point-to-surface RMS over the points used
+    FaceCalibration geometry;  // R_camera_accel as recorded (estimate_accel_mount measures it)
+    double rms_mm = 0.0;       // point-to-surface RMS over the points used
     std::map<std::string, int> points;  // artifact surface → points used
     std::vector<std::string> spheres;   // the spheres this face saw
     int iterations = 0;                 // Levenberg–Marquardt iterations, both rounds
@@ -86,14 +86,14 @@ struct AccelMount {
 // of each face while the head is still: mean_j = R_caᵀ·R_wc,jᵀ·g_up + bias (Kabsch on the
 // centred readings). The faces' orientations (`faces`, calibrated) must span two axes.
 core::Result<AccelMount> estimate_accel_mount(const core::Recording& recording,
-                                              const std::vector<FaceGeometry>& faces,
+                                              const std::vector<FaceCalibration>& faces,
                                               const AlignLimits& limits = {});
 
 // What `calibrate faces` found, face by face, accepted or not: what the commissioning report
 // shows (report::commissioning_html).
 struct FaceOutcome {
     std::string name;
-    FaceGeometry recorded;                 // the geometry the artifact recording claimed
+    FaceCalibration recorded;              // the geometry the artifact recording claimed
     std::optional<FaceAlignment> aligned;  // when the face was aligned within the limits
     std::string refused;                   // else why not
 };

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "hotgauge/acquire/scan.hpp"
 #include "hotgauge/acquire/triangulation.hpp"
 #include "hotgauge/calib/sensor.hpp"
 #include "hotgauge/core/recording.hpp"
@@ -20,18 +21,11 @@
 
 namespace hotgauge::calib {
 
-// A line-laser head: `direct_beam`, its design (acquire::design_direct_beam): ray i of the fan at
-// x_i = (i − (width−1)/2)·pitch on the plane z = standoff, the imager `baseline_mm` beside the
-// laser origin along the camera's y; or `pinhole`, an image-mode calibration (calibrate_sensor):
-// the camera with its distortion and the laser plane, profiles in its laser_frame.
-struct SensorModel {
+// A line-laser head: `direct_beam`, its design (acquire::SensorDesign, triangulated by
+// acquire::design_direct_beam); or `pinhole`, an image-mode calibration (calibrate_sensor): the
+// camera with its distortion and the laser plane, profiles in its laser_frame.
+struct SensorModel : acquire::SensorDesign {
     std::string model = "direct_beam";  // direct_beam | pinhole | stage
-    int width = 2048;
-    double pitch_mm = 0.2;
-    double standoff_mm = 890.0;
-    double min_range_mm = 600.0;
-    double max_range_mm = 1200.0;
-    double baseline_mm = 300.0;
     // model pinhole (width is the camera's; the direct-beam keys unused):
     PinholeCamera camera;
     LaserPlane plane;
@@ -39,12 +33,9 @@ struct SensorModel {
     acquire::CalibratedModel map;
 };
 
-struct FaceGeometry {
-    std::string name;
-    Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();  // at profile position 0
-    Eigen::Vector3d scan_direction = Eigen::Vector3d::UnitY();         // unit, world
-    double travel_scale = 1.0;  // true travel / commanded travel (axis speed or encoder error)
-    Eigen::Matrix3d R_camera_accel = Eigen::Matrix3d::Identity();  // accel axes → camera axes
+// A face's measured geometry (core::FaceGeometry: camera pose at profile position 0, scan
+// direction, travel scale, accelerometer axes → camera axes), with where it came from.
+struct FaceCalibration : core::FaceGeometry {
     // `calibrate faces`: the pose the artifact recording's face.yaml gave this face. Another
     // tool's recording, which may place the head per part (stand-off, start), takes the
     // calibration as a correction of its own pose (apply_geometry).
@@ -57,11 +48,11 @@ struct Calibration {
     std::string source;                       // the artifact, target or file the geometry came from
     std::map<std::string, double> residuals;  // method-specific figures, mm / px / deg / µs
     SensorModel sensor;
-    std::vector<FaceGeometry> faces;
+    std::vector<FaceCalibration> faces;
     Eigen::Vector3d accel_bias_mps2 = Eigen::Vector3d::Zero();  // accelerometer axes
     std::int64_t clock_offset_ns = 0;  // added to camera timestamps: camera → accel clock
 
-    const FaceGeometry* face(const std::string& name) const;
+    const FaceCalibration* face(const std::string& name) const;
     // Whether the faces' geometry was measured (false: design values asserted, method `nominal`,
     // or only the sensor calibrated since, method `sensor`: its faces are to be aligned again).
     bool measured() const { return method != "nominal" && method != "sensor"; }
@@ -94,5 +85,12 @@ core::Result<void> apply_geometry(const Calibration& c, const std::string& calib
 // range; pinhole, the calibration fitted into the calibrated model (fit_triangulation), whose
 // camera must be `height_px` rows high.
 core::Result<acquire::Triangulation> triangulation(const SensorModel& sensor, int height_px = 1088);
+
+// The scan settings for face `face` of the calibrated cell: `scan` with the face's geometry (its
+// travel scale applied to the positions), the cell's clock offset, and the recording marked as
+// a calibration's geometry. The daemon's and `hotgauge grab`'s. A face the calibration does not
+// hold is an error naming it.
+core::Result<acquire::ScanConfig> scan_config(const Calibration& c, const std::string& face,
+                                              acquire::ScanConfig scan);
 
 }  // namespace hotgauge::calib

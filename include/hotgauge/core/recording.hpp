@@ -13,17 +13,30 @@
 
 namespace hotgauge::core {
 
-// One scanned face: N profiles of W points each, plus the accelerometer record.
-struct FaceScan {
-    std::string name;  // folder name: top, bottom, side1, side2, ...
-    Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();  // face.yaml camera_to_world
+// A face of the cell: where its camera is, which way the axis carries it, how the accelerometer
+// sits in the head. The one type for it: a recording's face (FaceScan), a calibration's face
+// (calib::FaceCalibration), the simulator's (sim::FaceConfig) and the scan settings
+// (acquire::ScanConfig) all hold one. The cell's clock offset is not in it: the cell has one
+// camera → accelerometer clock offset, not one per face (calibration.yaml, the simulator's cell
+// config); a face scanned with it says so (FaceScan::clock_offset_ns).
+struct FaceGeometry {
+    std::string name;  // top, bottom, side1, side2, ... (a recording's folder name)
+    Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();  // at profile position 0
     Eigen::Vector3d scan_direction = Eigen::Vector3d::UnitY();         // unit, world frame
-    Eigen::Matrix3d R_camera_accel = Eigen::Matrix3d::Identity();      // face.yaml accel_to_camera
+    Eigen::Matrix3d R_camera_accel = Eigen::Matrix3d::Identity();      // accel axes → camera axes
+    double travel_scale = 1.0;  // true travel / commanded travel (axis speed or encoder error)
+
+    FaceGeometry& geometry() { return *this; }
+    const FaceGeometry& geometry() const { return *this; }
+};
+
+// One scanned face: its geometry (face.yaml's camera_to_world, scan_direction, accel_to_camera),
+// N profiles of W points each, plus the accelerometer record.
+struct FaceScan : FaceGeometry {
     // What the capturing software already applied from its calibration (face.yaml's optional
     // travel_scale and clock_offset_ns, docs/calibration.md): the positions are commanded travel
     // times travel_scale, the times camera clock + clock_offset_ns. A later calibration replaces
     // them (calib::apply_geometry). Other writers leave them out: 1 and 0.
-    double travel_scale = 1.0;
     std::int64_t clock_offset_ns = 0;
     // face.yaml's optional `geometry_source: calibration`: the pose and axes are a calibration's
     // of a fixed head (this software writes it). Another calibration then replaces them; in a

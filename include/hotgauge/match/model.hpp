@@ -48,7 +48,7 @@ float pair_angle(const Eigen::Vector3f& p1, const Eigen::Vector3f& n1, const Eig
 // The rigid motion that takes p to the origin and n onto +x.
 Eigen::Matrix<float, 3, 4> to_ref_frame(const Eigen::Vector3f& p, const Eigen::Vector3f& n);
 
-// A PPF model. Plain data (io/model_io.hpp saves and loads it); build it with from_recipe or
+// A PPF model. Plain data (model/model_io.hpp saves and loads it); build it with from_recipe or
 // from_samples, which keep the table consistent with the samples.
 struct Model {
     // Table entry: model reference point and its pair angle.

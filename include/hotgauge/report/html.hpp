@@ -9,13 +9,13 @@
 #include <string_view>
 #include <vector>
 
+#include "hotgauge/core/text.hpp"
+
 namespace hotgauge::report {
 
-// `text` with &, <, >, " and ' as entities: safe in element content and quoted attributes.
-std::string escape(std::string_view text);
-
-// `value` with `decimals` decimals ("62.213"); `sign`: always with its sign ("+0.213").
-std::string fixed(double value, int decimals, bool sign = false);
+// `text` with &, <, >, " and ' as entities (core::html_escape); `fixed`: core::fixed.
+inline std::string escape(std::string_view text) { return core::html_escape(text); }
+using core::fixed;
 
 // An 8-bit RGB picture, row-major, 3 bytes per pixel.
 struct RgbImage {

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "hotgauge/acquire/triangulation.hpp"
 #include "hotgauge/calib/artifact.hpp"
 #include "hotgauge/calib/calibration.hpp"
 #include "hotgauge/core/forged.hpp"
@@ -20,32 +21,25 @@
 
 namespace hotgauge::sim {
 
-// Line-laser triangulation sensor: the laser fan lies in the camera's y = 0 plane and starts at
-// the camera origin; ray i points at x_i = (i − (W−1)/2)·pitch on the plane z = standoff.
-struct SensorConfig {
-    int width = 2048;
-    double pitch_mm = 0.2;        // ray spacing at the standoff
-    double standoff_mm = 890.0;   // lens working distance (paper §3.3)
-    double min_range_mm = 600.0;  // measuring range along z_camera
-    double max_range_mm = 1200.0;
-    Eigen::Vector3d camera_center_mm{0.0, 300.0, 0.0};  // imager's centre, camera frame (occlusion)
-    double range_noise_mm = 0.05;                       // σ along the ray
-    double dropout_fraction = 0.01;                     // random missing returns
-    double spike_fraction = 0.002;                      // gross outliers along the ray
+// Line-laser triangulation sensor: its design (acquire::SensorDesign: the laser fan in the
+// camera's y = 0 plane from the camera origin, ray i at x_i = (i − (W−1)/2)·pitch on the plane
+// z = standoff, the imager at (0, baseline, 0) in the camera frame), and how it errs.
+struct SensorConfig : acquire::SensorDesign {
+    // The imager's centre in the camera frame (occlusion: it must see the lit point).
+    Eigen::Vector3d imager_mm() const { return {0.0, baseline_mm, 0.0}; }
+    double range_noise_mm = 0.05;     // σ along the ray
+    double dropout_fraction = 0.01;   // random missing returns
+    double spike_fraction = 0.002;    // gross outliers along the ray
     double spike_range_mm = 5.0;      // spikes are uniform in ±this along the ray
     double max_incidence_deg = 80.0;  // no return at grazing incidence
     double line_rate_hz = 1000.0;     // profiles per second
-    // A return needs the imager (camera_center_mm) to see the lit point: shadows at steps.
+    // A return needs the imager (imager_mm) to see the lit point: shadows at steps.
     // false: a point wherever the laser ray hits first (the incidence limit still applies).
     bool imager_occlusion = true;
 };
 
-struct FaceConfig {
-    std::string name;
-    Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();  // at profile position 0
-    Eigen::Vector3d scan_direction = Eigen::Vector3d::UnitY();
-    Eigen::Matrix3d R_camera_accel = Eigen::Matrix3d::Identity();
-    double travel_scale = 1.0;  // true travel / commanded travel (sim::with_geometry)
+// A face of the simulated cell: its geometry (travel_scale: sim::with_geometry) and its scan.
+struct FaceConfig : core::FaceGeometry {
     double scan_length_mm = 240.0;
     double profile_spacing_mm = 0.2;
     bool support_visible = true;  // the flat support plate (world z = 0) is in this scan

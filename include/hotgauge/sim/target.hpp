@@ -22,7 +22,7 @@ struct VirtualSensorCamera {
     Eigen::Isometry3d T_laser_camera = Eigen::Isometry3d::Identity();
 };
 
-// The head of `sensor`: the camera at its imager position (camera_center_mm), looking at the
+// The head of `sensor`: the camera at its imager position (SensorConfig::imager_mm), looking at the
 // middle of the measuring range, the field covering the fan's width; some distortion.
 VirtualSensorCamera design_sensor_camera(const SensorConfig& sensor);
 

@@ -6,7 +6,8 @@
 //
 // Scan motion is a constant-velocity axis: from the first frame after AcquisitionStart, the
 // sensor travels speed_mm_s along the face's scan direction, so profile k of an acquisition is
-// at speed · (t_k − t_0), as acquire::ScanBuilder assumes. Peaks frames bundle
+// at speed · (t_k − t_0) times the face's true travel_scale; acquire::ScanBuilder takes it as
+// speed · (t_k − t_0) times the calibrated one. Peaks frames bundle
 // profiles_per_frame = Height / rows_per_profile profiles, line_period_s apart.
 //
 // The conveyor (docs/virtual-cell.md "Parts"): a PLC loads part N (1, 2, ...) onto the support by

@@ -10,7 +10,7 @@
 #include "hotgauge/core/result.hpp"
 #include "hotgauge/match/model.hpp"
 
-namespace hotgauge::io {
+namespace hotgauge::model {
 
 inline constexpr std::uint32_t kModelFormatVersion = 2;
 
@@ -28,4 +28,4 @@ core::Result<match::Model> read_model(const std::filesystem::path& path);
 core::Result<match::Model> parse_model(std::span<const unsigned char> file,
                                        const std::filesystem::path& path);
 
-}  // namespace hotgauge::io
+}  // namespace hotgauge::model

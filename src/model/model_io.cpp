@@ -1,7 +1,7 @@
 // PPF model files (docs/model-file.md): magic, format version, body size, body, FNV-1a 64
 // checksum. Numbers are little-endian whatever the host; floats are stored as their bit patterns,
 // so a round trip is bit-exact.
-#include "hotgauge/io/model_io.hpp"
+#include "hotgauge/model/model_io.hpp"
 
 #include <unistd.h>
 
@@ -18,7 +18,7 @@
 #include "hotgauge/io/bytes.hpp"
 #include "hotgauge/io/checksum.hpp"
 
-namespace hotgauge::io {
+namespace hotgauge::model {
 namespace {
 
 namespace fs = std::filesystem;
@@ -186,7 +186,7 @@ std::vector<unsigned char> serialize(const Model& m) {
     }
     const std::uint64_t body = w.bytes.size() - kHeaderBytes;
     for (int i = 0; i < 8; ++i) w.bytes[12 + i] = static_cast<unsigned char>(body >> (8 * i));
-    w.u64(fnv1a64(w.bytes.data(), w.bytes.size()));
+    w.u64(io::fnv1a64(w.bytes.data(), w.bytes.size()));
     return w.bytes;
 }
 
@@ -264,7 +264,7 @@ Result<void> write_model(const Model& model, const fs::path& path) {
 }
 
 Result<Model> read_model(const fs::path& path) {
-    auto file = read_bytes(path);
+    auto file = io::read_bytes(path);
     if (!file) return file.error();
     return parse_model(file->data, path);
 }
@@ -294,7 +294,7 @@ Result<Model> parse_model(std::span<const unsigned char> b, const fs::path& path
         return make_error(where + "corrupt: " + std::to_string(available - body - kChecksumBytes) +
                           " unexpected bytes after the checksum");
     const std::size_t end = kHeaderBytes + static_cast<std::size_t>(body);
-    if (fnv1a64(b.data(), end) != le64(b.data() + end))
+    if (io::fnv1a64(b.data(), end) != le64(b.data() + end))
         return make_error(where + "corrupt: checksum mismatch");
     // The checksum matched, so the body is what some writer wrote; still check every count.
     Reader r(b.data(), end, kHeaderBytes);
@@ -307,4 +307,4 @@ Result<Model> parse_model(std::span<const unsigned char> b, const fs::path& path
     return m;
 }
 
-}  // namespace hotgauge::io
+}  // namespace hotgauge::model

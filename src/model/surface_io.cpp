@@ -5,7 +5,7 @@
 // What stays here is what they do not do: an error naming the file instead of PCL's -1 and its
 // message on stderr, the checks they skip (face indices, finite vertices, a binary STL shorter
 // than its triangle count), the sampling of a mesh by area and the cleanup of a scan.
-#include "hotgauge/io/surface_io.hpp"
+#include "hotgauge/model/surface_io.hpp"
 
 #include <pcl/PCLPointCloud2.h>
 #include <pcl/PolygonMesh.h>
@@ -39,7 +39,7 @@
 
 #include "hotgauge/match/normals.hpp"
 
-namespace hotgauge::io {
+namespace hotgauge::model {
 namespace {
 
 namespace fs = std::filesystem;
@@ -448,4 +448,4 @@ Result<SurfaceSamples> read_scan_samples(const fs::path& path) {
     return finish_scan(*raw, where);
 }
 
-}  // namespace hotgauge::io
+}  // namespace hotgauge::model

@@ -9,7 +9,7 @@
 
 #include "hotgauge/core/result.hpp"
 
-namespace hotgauge::io {
+namespace hotgauge::model {
 
 struct SurfaceSamples {
     std::vector<Eigen::Vector3f> points;   // mm
@@ -35,4 +35,4 @@ core::Result<SurfaceSamples> read_mesh_samples(const std::filesystem::path& path
 // parallel to z that orientation is arbitrary).
 core::Result<SurfaceSamples> read_scan_samples(const std::filesystem::path& path);
 
-}  // namespace hotgauge::io
+}  // namespace hotgauge::model
