@@ -384,11 +384,16 @@ def main():
         bits = vl.check_reasons(p, jsonl(line)[-1])
         assert bits & vl.FACE_MISSING, f"a face left out, but the part's reasons are {bits:#x}"
         # The other faces' features are measured, but the pose was found without the top face:
-        # degraded, so that they sort nothing.
+        # degraded, so that they sort nothing. A pose from fewer faces can also leave a narrow
+        # face unfit for a plane (Height 1's 0.47 mm bore step, "curved across": once in three
+        # fresh-clone runs): not measured, with its reason. Nothing is OK, nothing NOK, and all
+        # but that one are measured.
         others = [f for f in last["features"] if "top" not in f["faces"]]
-        assert others and all(f["verdict"] == "DEGRADED" and f["cold_mm"] is not None and
-                              "pose was found without face top" in f["reason"] for f in others), \
-            [(f["name"], f["verdict"], f["reason"]) for f in others]
+        degraded = [f for f in others if f["verdict"] == "DEGRADED" and f["cold_mm"] is not None
+                    and "pose was found without face top" in f["reason"]]
+        unmeasured = [f for f in others if f["verdict"] == "NOT_MEASURED" and f["reason"]]
+        assert (others and len(degraded) + len(unmeasured) == len(others) and
+                len(unmeasured) <= 1), [(f["name"], f["verdict"], f["reason"]) for f in others]
         files_intact()
 
         step("SIGTERM")

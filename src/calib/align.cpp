@@ -14,6 +14,18 @@ namespace {
 
 constexpr double kG = 9.81;  // m/s², recording-format-v1's g_up
 constexpr double kRadToDeg = 180.0 / M_PI;
+// The weak direction's words: its largest unknown, then up to this many in all, each carrying at
+// least this share of it (not measured).
+constexpr int kMaxUnknownsNamed = 3;
+constexpr double kMinShareNamed = 0.1;
+// Finding the balls again from the placed face: it is within about 1 mm, and a start 2° off
+// shears a 40 mm ball by about 0.6 mm in the recorded geometry (docs/calibration.md "Faces").
+constexpr double kNearStartErrorMm = 5.0;
+// A face's accelerometer record needs this many readings for its mean and scatter (not measured).
+constexpr std::int64_t kMinAccelReadings = 10;
+// The gravity directions' spread: the centred cross-covariance's second singular value, in g²,
+// below this the directions lie (nearly) on one line (not measured).
+constexpr double kMinGravitySpread = 0.1;
 
 using detail::Matrix9;
 
@@ -60,7 +72,8 @@ std::string unknowns_in_words(const Eigen::Matrix<double, 9, 1>& e, bool& travel
     for (int i = 0; i < 9; ++i) order[i] = i;
     std::sort(order.begin(), order.end(), [&](int a, int b) { return e(a) * e(a) > e(b) * e(b); });
     std::string words;
-    for (int k = 0; k < 3 && (k == 0 || e(order[k]) * e(order[k]) >= 0.1); ++k) {
+    for (int k = 0;
+         k < kMaxUnknownsNamed && (k == 0 || e(order[k]) * e(order[k]) >= kMinShareNamed); ++k) {
         const int percent = static_cast<int>(std::lround(100 * e(order[k]) * e(order[k])));
         words +=
             std::string(k ? ", " : "") + kUnknown[order[k]] + " " + std::to_string(percent) + " %";
@@ -216,7 +229,7 @@ core::Result<detail::FacePose> place_face(const Artifact& a,
                                 fixed(lim.max_start_error_mm, 1) +
                                 " mm): another artifact's certificate, or the wrong cell");
     AlignLimits near = lim;
-    near.max_start_error_mm = 5.0;  // the placed face is within about 1 mm
+    near.max_start_error_mm = kNearStartErrorMm;
     std::vector<detail::BallSeen> again = detail::find_balls(a, pts, *placed, near);
     if (static_cast<int>(again.size()) < lim.min_spheres) return placed;
     auto replaced = detail::place_from_balls(a, again, *placed);
@@ -284,7 +297,7 @@ core::Result<AccelMount> estimate_accel_mount(const core::Recording& rec,
         const FaceCalibration* g = nullptr;
         for (const auto& c : faces)
             if (c.name == f.name) g = &c;
-        if (!g || f.n_accel() < 10)
+        if (!g || f.n_accel() < kMinAccelReadings)
             return core::make_error("face " + f.name + ": no accelerometer record or geometry");
         Eigen::Vector3d mean = Eigen::Vector3d::Zero();
         for (std::int64_t j = 0; j < f.n_accel(); ++j) mean += f.accel(j);
@@ -312,7 +325,7 @@ core::Result<AccelMount> estimate_accel_mount(const core::Recording& rec,
     Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
     for (std::size_t j = 0; j < D.size(); ++j) H += (D[j] - d_mean) * (G[j] - g_mean).transpose();
     const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    if (!(svd.singularValues()(1) > 0.1 * kG * kG))
+    if (!(svd.singularValues()(1) > kMinGravitySpread * kG * kG))
         return core::make_error(
             "accelerometer: the faces' gravity directions lie on one line: gravity cannot fix the "
             "mount (scan 3 or more faces that look in different directions)");

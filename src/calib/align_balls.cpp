@@ -17,8 +17,25 @@ namespace {
 // The recorded geometry distorts a ball by its travel-scale and direction errors only (0.1 %
 // of 40 mm: 0.04 mm), so the band holds the whole ball.
 constexpr double kBandMm = 0.5;
-constexpr int kRansacRounds = 600;
+constexpr int kRansacRounds = 600;          // hypotheses per ball (not measured)
 constexpr std::size_t kScoreSample = 3000;  // candidates a hypothesis is scored on
+// Deterministic: the same scan gives the same calibration (docs/calibration.md "Faces").
+constexpr unsigned kRansacSeed = 20261207u;
+// A four-point sphere is a hypothesis when its radius is within this fraction of the
+// certificate's (not measured).
+constexpr double kRadiusFraction = 0.1;
+// Four points whose system's determinant is below this are taken as on one plane (a guard, not
+// measured).
+constexpr double kMinDeterminant = 1e-6;
+// Gauss–Newton on a ball's centre: at most this many steps, done when a step is below this (mm,
+// far below the 0.05 mm noise) (not measured).
+constexpr int kCentreIterations = 8;
+constexpr double kCentreStepMm = 1e-7;
+// Ceres on the balls' centres (a few balls × 3 residuals): iterations and tolerances (not
+// measured).
+constexpr int kCentresMaxIterations = 100;
+constexpr double kCentresFunctionTolerance = 1e-14;
+constexpr double kCentresParameterTolerance = 1e-12;
 
 // The sphere through four points, or false when they are (nearly) on one plane.
 bool sphere_through(const Eigen::Vector3d* p, Eigen::Vector3d& centre, double& radius) {
@@ -29,7 +46,7 @@ bool sphere_through(const Eigen::Vector3d* p, Eigen::Vector3d& centre, double& r
         b(i) = p[i].squaredNorm();
     }
     const Eigen::FullPivLU<Eigen::Matrix4d> lu(A);
-    if (!lu.isInvertible() || std::abs(A.determinant()) < 1e-6) return false;
+    if (!lu.isInvertible() || std::abs(A.determinant()) < kMinDeterminant) return false;
     const Eigen::Vector4d x = lu.solve(b);
     centre = x.head<3>();
     const double r2 = centre.squaredNorm() - x(3);
@@ -49,7 +66,7 @@ int count_in_band(const std::vector<Eigen::Vector3d>& pts, std::size_t stride,
 // Gauss–Newton on the centre of a ball of known radius, over the points within the band.
 Eigen::Vector3d refine_centre(const std::vector<Eigen::Vector3d>& pts, Eigen::Vector3d c, double r,
                               int& used, double& rms) {
-    for (int it = 0; it < 8; ++it) {
+    for (int it = 0; it < kCentreIterations; ++it) {
         Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
         Eigen::Vector3d g = Eigen::Vector3d::Zero();
         double sum2 = 0.0;
@@ -68,7 +85,7 @@ Eigen::Vector3d refine_centre(const std::vector<Eigen::Vector3d>& pts, Eigen::Ve
         rms = std::sqrt(sum2 / used);
         const Eigen::Vector3d step = -H.ldlt().solve(g);
         c += step;
-        if (step.norm() < 1e-7) break;
+        if (step.norm() < kCentreStepMm) break;
     }
     return c;
 }
@@ -76,7 +93,7 @@ Eigen::Vector3d refine_centre(const std::vector<Eigen::Vector3d>& pts, Eigen::Ve
 // The largest set of candidate points on one sphere of radius r (RANSAC), its centre refined.
 bool find_ball(const std::vector<Eigen::Vector3d>& cand, double r, Eigen::Vector3d& centre,
                int& used, double& rms) {
-    std::mt19937 rng(20261207u);  // deterministic: the same scan gives the same calibration
+    std::mt19937 rng(kRansacSeed);
     std::uniform_int_distribution<std::size_t> pick(0, cand.size() - 1);
     const std::size_t stride = std::max<std::size_t>(1, cand.size() / kScoreSample);
     int best = 0;
@@ -84,7 +101,7 @@ bool find_ball(const std::vector<Eigen::Vector3d>& cand, double r, Eigen::Vector
         Eigen::Vector3d p[4], c;
         for (auto& q : p) q = cand[pick(rng)];
         double radius = 0.0;
-        if (!sphere_through(p, c, radius) || std::abs(radius - r) > 0.1 * r) continue;
+        if (!sphere_through(p, c, radius) || std::abs(radius - r) > kRadiusFraction * r) continue;
         const int n = count_in_band(cand, stride, c, r);
         if (n > best) {
             best = n;
@@ -165,9 +182,9 @@ FacePose solve_centres(const Artifact& a, const std::vector<BallSeen>& balls, Fa
     problem.SetManifold(pose.R.coeffs().data(), new ceres::EigenQuaternionManifold);
     ceres::Solver::Options opt;
     opt.logging_type = ceres::SILENT;
-    opt.max_num_iterations = 100;
-    opt.function_tolerance = 1e-14;
-    opt.parameter_tolerance = 1e-12;
+    opt.max_num_iterations = kCentresMaxIterations;
+    opt.function_tolerance = kCentresFunctionTolerance;
+    opt.parameter_tolerance = kCentresParameterTolerance;
     ceres::Solver::Summary summary;
     ceres::Solve(opt, &problem, &summary);
     pose.R.normalize();

@@ -19,6 +19,19 @@ constexpr double kFirstGateMm = 1.0;
 // A plane carries three numbers of the pose; this many of its points (evenly spread) fix them to
 // well under a micrometre, and keep the problem to about 3.5 · 10⁵ residuals per face.
 constexpr std::size_t kMaxPlanePoints = 200000;
+// Two rounds, the second on the first fit's points within kKeepSigma of its noise; a Cauchy loss
+// at kLossSigma of the face's own noise (docs/calibration.md "Faces", not measured).
+constexpr int kRounds = 2;
+constexpr double kKeepSigma = 5.0;
+constexpr double kLossSigma = 3.0;
+// Median absolute deviation → σ for normally distributed noise.
+constexpr double kMadToSigma = 1.4826;
+// Ceres on every point: iterations and tolerances (not measured).
+constexpr int kFitMaxIterations = 50;
+constexpr double kFitFunctionTolerance = 1e-12;
+constexpr double kFitParameterTolerance = 1e-12;
+// Threads for Ceres's solve, covariance and Jacobian (not measured).
+constexpr int kThreads = 2;
 
 // Signed distance of a point, placed by the pose, from its artifact surface.
 struct PointResidual {
@@ -81,7 +94,7 @@ double robust_sigma(const Assignment& as) {
     if (d.empty()) return 0.0;
     auto mid = d.begin() + static_cast<std::ptrdiff_t>(d.size() / 2);
     std::nth_element(d.begin(), mid, d.end());
-    return 1.4826 * *mid;
+    return kMadToSigma * *mid;
 }
 
 // The points used, per surface: all of a sphere's, a plane's thinned evenly to kMaxPlanePoints.
@@ -135,10 +148,10 @@ Solved solve(const Artifact& a, const std::vector<ScanPoint>& pts, const Assignm
     ceres::Solver::Options opt;
     opt.logging_type = ceres::SILENT;
     opt.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
-    opt.max_num_iterations = 50;
-    opt.function_tolerance = 1e-12;
-    opt.parameter_tolerance = 1e-12;
-    opt.num_threads = 2;
+    opt.max_num_iterations = kFitMaxIterations;
+    opt.function_tolerance = kFitFunctionTolerance;
+    opt.parameter_tolerance = kFitParameterTolerance;
+    opt.num_threads = kThreads;
     ceres::Solver::Summary summary;
     ceres::Solve(opt, s.problem.get(), &summary);
     pose.R.normalize();
@@ -164,7 +177,7 @@ bool covariance(ceres::Problem& problem, FacePose& pose, double sigma2, Matrix9&
     // Ceres's alone in this process.
     FLAGS_minloglevel = google::GLOG_ERROR;
     ceres::Covariance::Options co;
-    co.num_threads = 2;
+    co.num_threads = kThreads;
     ceres::Covariance cov(co);
     if (!cov.Compute(pairs, &problem)) return false;
     const double scale[3] = {2.0, 1.0, 1.0};
@@ -183,7 +196,7 @@ bool covariance(ceres::Problem& problem, FacePose& pose, double sigma2, Matrix9&
 Matrix9 information(ceres::Problem& problem, FacePose& pose, double sigma2) {
     ceres::Problem::EvaluateOptions eo;
     eo.parameter_blocks = {pose.R.coeffs().data(), pose.t.data(), pose.v.data()};
-    eo.num_threads = 2;
+    eo.num_threads = kThreads;
     ceres::CRSMatrix J;
     problem.Evaluate(eo, nullptr, nullptr, nullptr, &J);
     Matrix9 H = Matrix9::Zero();
@@ -200,6 +213,7 @@ Matrix9 information(ceres::Problem& problem, FacePose& pose, double sigma2) {
 // Per surface the mean and RMS of the used points' distances, and their map over the scan.
 void summarize(const Artifact& a, const std::vector<ScanPoint>& pts, const Assignment& as,
                const std::vector<std::size_t>& use, PointFit& out) {
+    // The residual map's grid: columns across the scan, rows along it (not measured).
     constexpr int kColumns = 120, kRows = 80;
     const std::size_t n = surface_count(a);
     out.mean_mm.assign(n, 0.0);
@@ -249,15 +263,15 @@ core::Result<PointFit> fit_points(const Artifact& a, const std::vector<ScanPoint
     double sigma = robust_sigma(as);
     Solved s;
     std::vector<std::size_t> use;
-    for (int round = 0; round < 2; ++round) {
+    for (int round = 0; round < kRounds; ++round) {
         if (round > 0) {  // the noise measured at the first fit's pose, and its points within 5σ
             as = assign(a, pts, out.pose, kFirstGateMm);
             sigma = robust_sigma(as);
-            keep_within(as, std::min(kFirstGateMm, 5.0 * sigma));
+            keep_within(as, std::min(kFirstGateMm, kKeepSigma * sigma));
         }
         if (!(sigma > 0.0)) return core::make_error("no point lies on the artifact's surfaces");
         use = chosen_points(a, as, out.counts);
-        s = solve(a, pts, as, use, 3.0 * sigma, out.pose);
+        s = solve(a, pts, as, use, kLossSigma * sigma, out.pose);
         out.iterations += s.iterations;
     }
     if (s.m <= 9) return core::make_error("fewer than 10 points on the artifact's surfaces");

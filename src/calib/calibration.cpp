@@ -12,6 +12,9 @@ namespace {
 using io::YamlReader;
 
 constexpr const char* kFormat = "hotgauge-calibration-1";
+// A plane normal or scan direction read is a unit vector when its norm is within this of 1 (not
+// measured).
+constexpr double kUnitTolerance = 1e-6;
 
 double positive(const YamlReader& y, const YAML::Node& map, const std::string& what,
                 const char* key) {
@@ -43,7 +46,7 @@ SensorModel read_pinhole(const YamlReader& y, const YAML::Node& s) {
     const YAML::Node n = y.require(s, w, "plane_normal");
     const auto v = y.numbers(n, w + ".plane_normal", 3);
     m.plane.normal = Eigen::Vector3d(v[0], v[1], v[2]);
-    if (std::abs(m.plane.normal.norm() - 1.0) > 1e-6)
+    if (std::abs(m.plane.normal.norm() - 1.0) > kUnitTolerance)
         y.fail(n, w + ".plane_normal: must be a unit vector");
     m.plane.offset_mm = positive(y, s, w, "plane_offset_mm");
     return m;
@@ -119,7 +122,7 @@ FaceCalibration read_face(const YamlReader& y, const YAML::Node& f, const std::s
     const YAML::Node d = y.require(f, w, "scan_direction");
     const auto v = y.numbers(d, w + ".scan_direction", 3);
     g.scan_direction = Eigen::Vector3d(v[0], v[1], v[2]);
-    if (std::abs(g.scan_direction.norm() - 1.0) > 1e-6)
+    if (std::abs(g.scan_direction.norm() - 1.0) > kUnitTolerance)
         y.fail(d, w + ".scan_direction: must be a unit vector");
     g.travel_scale = positive(y, f, w, "travel_scale");
     g.R_camera_accel = y.rotation(y.require(f, w, "accel_to_camera"), w + ".accel_to_camera");

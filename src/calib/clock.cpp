@@ -10,11 +10,22 @@ namespace {
 
 constexpr double kGateMm = 3.0;      // points within this of a surface (press vibration ≤ 1 mm)
 constexpr double kFineGateMm = 0.3;  // ... and of it compensated (6σ of a 0.05 mm sensor)
-constexpr int kMinPoints = 20;       // per profile
+constexpr int kMinPoints = 20;       // per profile (not measured)
 constexpr int kBlocksPerFace = 3;    // for the uncertainty: the offset per block of profiles
 constexpr double kStepS = 0.25e-3;   // coarse grid, finer than a quarter period of 47 Hz
-constexpr double kFineStepS = 0.05e-3;
-constexpr double kFineSpanS = 1e-3;
+constexpr double kFineStepS = 0.05e-3;  // fine grid (not measured)
+constexpr double kFineSpanS = 1e-3;     // ... over ± four coarse steps about the coarse best
+// A profile's motion counts only along directions its normals weigh at least this fraction
+// (M's eigenvalues, which sum to 1): the pseudo-inverse's cut (not measured).
+constexpr double kMinNormalWeight = 1e-3;
+// The parabolas' span is halved down to this (s): 0.1 µs, far below the 50 µs the clock offset
+// is held to (docs/calibration.md) (not measured).
+constexpr double kMinSpanS = 1e-7;
+// A face takes part with at least this many profiles on the artifact (not measured).
+constexpr std::size_t kMinProfiles = 100;
+// Below this RMS motion (mm) the head moved too little to time the accelerometer
+// (docs/calibration.md: 20 µm; not measured).
+constexpr double kMinMotionMm = 0.02;
 
 // One profile's points on the artifact, reduced to what the cost needs: with e_i = d_i + n_i·u,
 // Σ e_i² = c + 2·u·b + uᵀ·M·u.
@@ -64,7 +75,7 @@ FaceSums face_sums(const core::FaceScan& f, const Artifact& a,
             s.M /= s.n;
             const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(s.M);
             for (int e = 0; e < 3; ++e)
-                if (eig.eigenvalues()(e) > 1e-3)
+                if (eig.eigenvalues()(e) > kMinNormalWeight)
                     s.motion2 +=
                         std::pow(eig.eigenvectors().col(e).dot(s.b), 2) / eig.eigenvalues()(e);
             out.profiles.push_back(s);
@@ -139,7 +150,7 @@ Search search(const std::vector<FaceSums>& faces, const compensate::Compensation
     out.at_edge = g0 == 0 || g0 == n - 1;
     out.best = from + g0 * step;
     out.cost = total(grid[g0]);
-    for (double h = step; h > 1e-7; h *= 0.5) {
+    for (double h = step; h > kMinSpanS; h *= 0.5) {
         const double cm = total(block_costs(faces, config, out.best - h));
         const double cp = total(block_costs(faces, config, out.best + h));
         const double d = parabola_min(out.best, h, cm, out.cost, cp);
@@ -171,7 +182,7 @@ std::vector<FaceSums> all_face_sums(const core::Recording& rec, const Artifact& 
             if (u.size() != static_cast<std::size_t>(f.n_profiles())) continue;
         }
         FaceSums s = face_sums(f, a, config ? &u : nullptr, gate_mm);
-        if (s.profiles.size() >= 100) faces.push_back(std::move(s));
+        if (s.profiles.size() >= kMinProfiles) faces.push_back(std::move(s));
     }
     return faces;
 }
@@ -183,7 +194,8 @@ core::Result<ClockOffset> estimate_clock_offset(const core::Recording& rec, cons
                                                 double search_ms) {
     std::vector<FaceSums> faces = all_face_sums(rec, a, nullptr, 0.0, kGateMm);
     if (faces.empty())
-        return core::make_error("no face sees the artifact in at least 100 profiles");
+        return core::make_error("no face sees the artifact in at least " +
+                                std::to_string(kMinProfiles) + " profiles");
     const std::int64_t applied = faces.front().face->clock_offset_ns;
     for (const auto& fs : faces)
         if (fs.face->clock_offset_ns != applied)
@@ -193,7 +205,7 @@ core::Result<ClockOffset> estimate_clock_offset(const core::Recording& rec, cons
     for (const auto& fs : faces)
         for (const auto& p : fs.profiles) still += p.motion2, n += 1.0;
     out.motion_mm = std::sqrt(still / n);
-    if (out.motion_mm < 0.02)
+    if (out.motion_mm < kMinMotionMm)
         return core::make_error("the artifact moved " + std::to_string(out.motion_mm * 1e3) +
                                 " µm RMS: too still to time the accelerometer (run the press)");
     // Coarse, on every point near the artifact; then fine, on the points that lie on it once

@@ -9,7 +9,17 @@
 namespace hotgauge::calib {
 namespace {
 
+// Two motion axes count as two this far apart (docs/calibration.md: 5°; not measured).
 constexpr double kMinAxisSpreadDeg = 5.0;
+// A relative motion turning less than this (rad, about 0.06°) has no axis to count (not measured).
+constexpr double kMinTurnRad = 1e-3;
+// The joint refinement: Gauss–Newton steps at most, done when a step's norm is below
+// kRefineStop; forward differences of kRotationStep (rad) and kTranslationStep (mm) (not
+// measured).
+constexpr int kRefineIterations = 20;
+constexpr double kRefineStop = 1e-10;
+constexpr double kRotationStep = 1e-7;
+constexpr double kTranslationStep = 1e-5;
 
 // Whether the relative motions between poses turn about two directions at least
 // kMinAxisSpreadDeg apart (with one direction only, X's translation along it is not determined).
@@ -18,7 +28,7 @@ bool motions_turn_about_two_axes(std::span<const HandEyeSample> s) {
     for (std::size_t i = 1; i < s.size(); ++i) {
         const Eigen::AngleAxisd a(
             (s[0].T_base_flange.linear().transpose() * s[i].T_base_flange.linear()));
-        if (a.angle() > 1e-3) axes.push_back(a.axis());
+        if (a.angle() > kMinTurnRad) axes.push_back(a.axis());
     }
     const double min_sin = std::sin(kMinAxisSpreadDeg * M_PI / 180.0);
     for (std::size_t i = 0; i < axes.size(); ++i)
@@ -88,12 +98,12 @@ Eigen::Isometry3d refine(std::span<const HandEyeSample> s, Eigen::Isometry3d X) 
     for (const auto& k : s) lever += k.T_camera_target.translation().norm();
     lever /= static_cast<double>(s.size());
     Eigen::Isometry3d Z = s[0].T_base_flange * X * s[0].T_camera_target;
-    for (int iteration = 0; iteration < 20; ++iteration) {
+    for (int iteration = 0; iteration < kRefineIterations; ++iteration) {
         const Eigen::VectorXd r0 = pose_errors(s, X, Z, lever);
         Eigen::MatrixXd J(r0.size(), 12);
         for (int p = 0; p < 12; ++p) {
             Eigen::Matrix<double, 6, 1> d = Eigen::Matrix<double, 6, 1>::Zero();
-            const double h = p % 6 < 3 ? 1e-7 : 1e-5;
+            const double h = p % 6 < 3 ? kRotationStep : kTranslationStep;
             d(p % 6) = h;
             const Eigen::VectorXd r = p < 6 ? pose_errors(s, X * exp_se3(d), Z, lever)
                                             : pose_errors(s, X, Z * exp_se3(d), lever);
@@ -102,7 +112,7 @@ Eigen::Isometry3d refine(std::span<const HandEyeSample> s, Eigen::Isometry3d X) 
         const Eigen::VectorXd step = J.colPivHouseholderQr().solve(-r0);
         X = X * exp_se3(step.head<6>());
         Z = Z * exp_se3(step.tail<6>());
-        if (step.norm() < 1e-10) break;
+        if (step.norm() < kRefineStop) break;
     }
     return X;
 }

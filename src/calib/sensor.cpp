@@ -12,6 +12,28 @@ namespace hotgauge::calib {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+// OpenCV's iterations and tolerances: undistortPoints (rays), cornerSubPix (corners),
+// calibrateCamera (not measured).
+constexpr int kUndistortMaxIterations = 50;
+constexpr double kUndistortEpsilon = 1e-12;
+constexpr int kCornerMaxIterations = 100;
+constexpr double kCornerEpsilon = 1e-4;
+constexpr int kCalibrateMaxIterations = 300;
+constexpr double kCalibrateEpsilon = 1e-16;
+// cornerSubPix's half window (a 23 × 23 px window); docs/calibration.md: the window size, 5 to
+// 21 px, changes nothing.
+constexpr int kCornerHalfWindow = 11;
+// A laser image gives at least this many points on its board, all of them together this many
+// for the plane (not measured).
+constexpr std::size_t kMinLaserPointsPerImage = 50;
+constexpr std::size_t kMinLaserPoints = 100;
+// The laser points' second singular value against the first: below this fraction they lie on
+// one line (not measured).
+constexpr double kMinLineSpread = 1e-3;
+// The laser plane is across the camera's rows: its normal's y at least kMinNormalY, its x at
+// most kMaxNormalX (laser_frame divides by the normal's y) (not measured).
+constexpr double kMinNormalY = 0.05;
+constexpr double kMaxNormalX = 0.99;
 
 cv::Mat camera_matrix(const PinholeCamera& c) {
     return (cv::Mat_<double>(3, 3) << c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1);
@@ -26,9 +48,9 @@ cv::Mat distortion(const PinholeCamera& c) {
 std::vector<cv::Point2d> rays(const PinholeCamera& c, const std::vector<cv::Point2d>& px) {
     std::vector<cv::Point2d> out;
     if (px.empty()) return out;
-    cv::undistortPoints(
-        px, out, camera_matrix(c), distortion(c), cv::noArray(), cv::noArray(),
-        cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-12));
+    cv::undistortPoints(px, out, camera_matrix(c), distortion(c), cv::noArray(), cv::noArray(),
+                        cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS,
+                                         kUndistortMaxIterations, kUndistortEpsilon));
     return out;
 }
 
@@ -100,9 +122,10 @@ core::Result<Corners> find_corners(const std::vector<TargetView>& views, const C
             return core::make_error("sensor calibration: target not found in image " +
                                     std::to_string(i + 1) + " (" + std::to_string(b.cols) + " × " +
                                     std::to_string(b.rows) + " inner corners)");
-        cv::cornerSubPix(
-            mat(views[i].board), c, cv::Size(11, 11), cv::Size(-1, -1),
-            cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-4));
+        cv::cornerSubPix(mat(views[i].board), c, cv::Size(kCornerHalfWindow, kCornerHalfWindow),
+                         cv::Size(-1, -1),
+                         cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS,
+                                          kCornerMaxIterations, kCornerEpsilon));
         corners.push_back(std::move(c));
     }
     return corners;
@@ -127,9 +150,10 @@ SensorCalibration calibrate_camera(const Corners& corners, const Checkerboard& b
     std::vector<cv::Mat> rvecs, tvecs;
     SensorCalibration out;
     out.views = static_cast<int>(corners.size());
-    out.reprojection_rms_px = cv::calibrateCamera(
-        objects, corners, size, K, dist, rvecs, tvecs, 0,
-        cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 300, 1e-16));
+    out.reprojection_rms_px =
+        cv::calibrateCamera(objects, corners, size, K, dist, rvecs, tvecs, 0,
+                            cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS,
+                                             kCalibrateMaxIterations, kCalibrateEpsilon));
     PinholeCamera& cam = out.camera;
     cam.width = size.width;
     cam.height = size.height;
@@ -152,18 +176,19 @@ core::Result<void> fit_laser_plane(const std::vector<TargetView>& views,
     for (std::size_t i = 0; i < views.size(); ++i) {
         if (views[i].laser.empty()) continue;
         auto p = laser_points(out.camera, views[i].laser, T_camera_board[i]);
-        if (p.size() < 50)
+        if (p.size() < kMinLaserPointsPerImage)
             return core::make_error("sensor calibration: no laser line in laser image " +
                                     std::to_string(i + 1));
         pts.insert(pts.end(), p.begin(), p.end());
     }
-    if (pts.size() < 100) return core::make_error("sensor calibration: no laser images");
+    if (pts.size() < kMinLaserPoints)
+        return core::make_error("sensor calibration: no laser images");
     Eigen::Vector3d mean = Eigen::Vector3d::Zero();
     for (const auto& p : pts) mean += p / static_cast<double>(pts.size());
     Eigen::Matrix3d S = Eigen::Matrix3d::Zero();
     for (const auto& p : pts) S += (p - mean) * (p - mean).transpose();
     const Eigen::JacobiSVD<Eigen::Matrix3d> svd(S, Eigen::ComputeFullU);
-    if (!(svd.singularValues()(1) > 1e-3 * svd.singularValues()(0)))
+    if (!(svd.singularValues()(1) > kMinLineSpread * svd.singularValues()(0)))
         return core::make_error(
             "sensor calibration: the laser lines lie on one line: tilt the board between views");
     out.plane.normal = svd.matrixU().col(2);
@@ -215,7 +240,7 @@ Eigen::Isometry3d laser_frame(const SensorCalibration& c) {
 
 core::Result<acquire::CalibrationFit> fit_triangulation(const SensorCalibration& c, int step,
                                                         int degree, int x_degree) {
-    if (std::abs(c.plane.normal.y()) < 0.05 || std::abs(c.plane.normal.x()) > 0.99)
+    if (std::abs(c.plane.normal.y()) < kMinNormalY || std::abs(c.plane.normal.x()) > kMaxNormalX)
         return core::make_error(
             "sensor calibration: the laser plane is not across the camera's rows (its normal " +
             std::string("must have a y component): the head's camera is turned on its axis"));

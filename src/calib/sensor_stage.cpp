@@ -10,6 +10,11 @@ namespace hotgauge::calib {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
+// A reading's stripe needs this many usable columns (not measured).
+constexpr int kMinLitColumns = 16;
+// Level plates' placeholder x = kPlaceholderPitch·u·height: any x that grows with the column will
+// do, only the range law is used from that fit (not measured).
+constexpr double kPlaceholderPitch = 1e-3;
 
 // The stripe of every reading: per column its row, and what the stage says of the point.
 struct Stripe {
@@ -39,7 +44,7 @@ core::Result<std::vector<Stripe>> stripes(const std::vector<StageReading>& readi
                 v = std::numeric_limits<double>::quiet_NaN();
         int lit = 0;
         for (double v : s.rows) lit += std::isfinite(v);
-        if (lit < 16) return core::make_error(w + "no laser line in the image");
+        if (lit < kMinLitColumns) return core::make_error(w + "no laser line in the image");
         out.push_back(std::move(s));
     }
     return out;
@@ -54,7 +59,8 @@ std::vector<acquire::CalibrationSample> level_samples(const std::vector<Stripe>&
             for (std::size_t u = 0; u < r.rows.size(); ++u)
                 if (std::isfinite(r.rows[u]))
                     out.push_back({static_cast<double>(u), r.rows[u],
-                                   1e-3 * static_cast<double>(u) * r.height_mm, r.height_mm});
+                                   kPlaceholderPitch * static_cast<double>(u) * r.height_mm,
+                                   r.height_mm});
     return out;
 }
 
@@ -79,7 +85,7 @@ std::vector<acquire::CalibrationSample> tilted_samples(const std::vector<Stripe>
 // kAcross in the column: one smooth surface over the image (the lens's distortion is smooth),
 // fitted to every tilted sample at once, so that a column's law does not carry its own few
 // samples' noise. Returns the RMS of x.
-constexpr int kAcross = 6;
+constexpr int kAcross = 6;  // (not measured)
 
 core::Result<double> fit_x_surface(const std::vector<acquire::CalibrationSample>& samples,
                                    int x_degree, acquire::CalibratedModel& m) {

@@ -37,6 +37,20 @@ struct GridGap {
 // integrate_twice returns zeros for fewer samples than this: no record to speak of (a guard
 // kept from the first version, d17be8d, not a measured limit).
 constexpr int kMinIntegrableSamples = 8;
+// The Tukey taper's ramps take at most this share (1/4) of the record at each end (not measured).
+constexpr int kMaxRampDivisor = 4;
+// The noise density is read off the top band [0.3, 0.45] × the rate, far above any press mode,
+// from at least 4 segments (docs/compensation.md, "Its own error"; the count not measured).
+constexpr double kTopBandLo = 0.3, kTopBandHi = 0.45;
+constexpr int kMinNoiseSegments = 4;
+// The displacement error's frequency grid spans fc/20 to 40·fc (it holds all but 1e-5 of
+// hp²/(2πf)⁴), and its lags reach 2.5 s or 4 corner periods, past the error's correlation
+// (docs/compensation.md, "Its own error").
+constexpr double kGridBelowCorner = 20.0, kGridAboveCorner = 40.0;
+constexpr double kMinLagSpanS = 2.5, kLagPeriods = 4.0;
+// The bridge's ridge on BᵀWB: this share of its mean diagonal, plus a floor for an all-zero one
+// (not measured).
+constexpr double kRidgeRel = 1e-12, kRidgeFloor = 1e-30;
 
 }  // namespace
 
@@ -52,7 +66,7 @@ std::vector<double> integrate_twice(const std::vector<double>& accel, double rat
     mean /= static_cast<double>(n);
     for (double& v : a) v -= mean;
     // Tukey taper: cosine ramps at both ends, flat in between.
-    const int ramp = std::min(n / 4, static_cast<int>(c.taper_s * rate_hz));
+    const int ramp = std::min(n / kMaxRampDivisor, static_cast<int>(c.taper_s * rate_hz));
     for (int i = 0; i < ramp; ++i) {
         const double w = 0.5 * (1.0 - std::cos(std::numbers::pi * (i + 0.5) / ramp));
         a[i] *= w;
@@ -108,9 +122,9 @@ std::array<double, 3> accel_noise_density(const std::array<std::vector<double>, 
         for (std::size_t s0 = run; s0 + kSegment <= end; s0 += kSegment / 2) starts.push_back(s0);
         run = std::max(run, end);
     }
-    if (starts.size() < 4) return out;  // too little record to tell
-    const int k_lo = static_cast<int>(std::ceil(0.3 * kSegment)),
-              k_hi = static_cast<int>(0.45 * kSegment);
+    if (starts.size() < kMinNoiseSegments) return out;  // too little record to tell
+    const int k_lo = static_cast<int>(std::ceil(kTopBandLo * kSegment)),
+              k_hi = static_cast<int>(kTopBandHi * kSegment);
     for (int a = 0; a < 3; ++a) {
         std::vector<double> p;
         for (const std::size_t s0 : starts) {
@@ -133,12 +147,13 @@ core::DisplacementNoise displacement_noise(const std::array<double, 3>& density_
     constexpr double kLagS = 0.01;
     constexpr int kFreqs = 800;
     // hp²/(2πf)⁴ peaks near the corner: a log grid from fc/20 to 40·fc holds all but 1e-5 of it.
-    const double fc = c.highpass_hz, lo = std::log(fc / 20.0), hi = std::log(40.0 * fc);
+    const double fc = c.highpass_hz, lo = std::log(fc / kGridBelowCorner),
+                 hi = std::log(kGridAboveCorner * fc);
     core::DisplacementNoise out;
     if (!(fc > 0)) return out;
     // Past the error's correlation (it lasts about a period of the corner), so that the sums
     // over it stay a variance.
-    const int lags = static_cast<int>(std::max(2.5, 4.0 / fc) / kLagS) + 1;
+    const int lags = static_cast<int>(std::max(kMinLagSpanS, kLagPeriods / fc) / kLagS) + 1;
     std::vector<double> shape(static_cast<std::size_t>(lags), 0.0);
     for (int j = 0; j < kFreqs; ++j) {
         const double f = std::exp(lo + (hi - lo) * (j + 0.5) / kFreqs);
@@ -205,7 +220,7 @@ std::array<std::vector<double>, 3> integrate_across_gaps(
              i <= static_cast<Eigen::Index>(g.last) && i < n; ++i)
             use(i) = 0.0;
     Eigen::MatrixXd BtWB = B.transpose() * use.asDiagonal() * B;
-    BtWB.diagonal().array() += 1e-12 * (BtWB.trace() / static_cast<double>(m) + 1e-30);
+    BtWB.diagonal().array() += kRidgeRel * (BtWB.trace() / static_cast<double>(m) + kRidgeFloor);
     const auto ldlt = BtWB.ldlt();
     for (int k = 0; k < 3; ++k) {
         Eigen::Map<Eigen::VectorXd> uk(u[k].data(), n);

@@ -10,13 +10,22 @@
 #include "internal.hpp"
 
 namespace hotgauge::match::detail {
+namespace {
+
+// The k-d tree's leaf size, as estimate_normals' (not measured).
+constexpr int kKdLeafSize = 15;
+// The dense samples' spacing: the median nearest-neighbour distance over about this many of them
+// (not measured).
+constexpr int kSpacingSamples = 500;
+
+}  // namespace
 
 struct Surface::KdTree {
     flann::Matrix<float> data;
     flann::Index<flann::L2_Simple<float>> index;
     explicit KdTree(const std::vector<Eigen::Vector3f>& pts)
         : data(const_cast<float*>(pts.front().data()), pts.size(), 3, sizeof(Eigen::Vector3f)),
-          index(data, flann::KDTreeSingleIndexParams(15)) {
+          index(data, flann::KDTreeSingleIndexParams(kKdLeafSize)) {
         index.buildIndex();
     }
 };
@@ -42,7 +51,8 @@ Surface::Surface(const Model& model) : model_(model) {
             tree_ = new KdTree(model.dense_points);
             // Sample spacing: the median nearest-neighbour distance of a subset.
             std::vector<float> nn;
-            const std::size_t step = std::max<std::size_t>(1, model.dense_points.size() / 500);
+            const std::size_t step =
+                std::max<std::size_t>(1, model.dense_points.size() / kSpacingSamples);
             for (std::size_t i = 0; i < model.dense_points.size(); i += step) {
                 int idx[2];
                 float d2[2];

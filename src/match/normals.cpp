@@ -12,6 +12,7 @@ namespace {
 
 constexpr std::size_t kNormalNeighbours = 12;  // PCA neighbourhood, the point excluded
 constexpr std::size_t kBatch = 1 << 16;        // queries per knnSearch: bounded scratch memory
+constexpr int kKdLeafSize = 15;                // the k-d tree's leaf size (not measured)
 
 // The normal of a neighbourhood (indices into `points`), towards +z; false for a line or a point.
 bool pca_normal(const std::vector<Eigen::Vector3f>& points, const std::size_t* neighbours,
@@ -47,7 +48,8 @@ core::Result<OrientedPoints> estimate_normals(const std::vector<Eigen::Vector3f>
     std::vector<float> dist(idx.size());
     try {
         flann::Matrix<float> data(flat.data(), n, 3);
-        flann::Index<flann::L2_Simple<float>> index(data, flann::KDTreeSingleIndexParams(15));
+        flann::Index<flann::L2_Simple<float>> index(data,
+                                                    flann::KDTreeSingleIndexParams(kKdLeafSize));
         index.buildIndex();
         flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED);
         for (std::size_t first = 0; first < n; first += kBatch) {

@@ -12,6 +12,20 @@
 namespace hotgauge::match::detail {
 namespace {
 
+// A face's column pitch is the median over every n/16-th profile, and either pitch is floored at
+// 1 µm; a face with nothing to measure takes 1 mm (not measured).
+constexpr std::int64_t kPitchProfileShare = 16;
+constexpr double kMinPitchMm = 1e-3, kFallbackPitchMm = 1.0;
+// A voting sample's normal: neighbours farther than this many normal radii are across a depth
+// jump; at least this many of the 3 × 3 must remain, and the smallest eigenvalue be at most this
+// share of their spread's (else an edge or a spike, not a smooth surface) (not measured).
+constexpr double kMaxJumpRadii = 3.0;
+constexpr int kMinNeighbours = 6;
+constexpr float kMaxFlatness = 0.05f;
+// The background plane: RANSAC hypotheses from a fixed seed (the same scan, the same plane), and
+// at least this many samples to look for one in and to accept one (not measured).
+constexpr int kPlaneHypotheses = 200, kPlaneSeed = 12345, kMinPlaneSamples = 50;
+
 // World-point access to one face, compensated when u is given.
 class FaceGrid {
   public:
@@ -48,22 +62,22 @@ class FaceGrid {
   private:
     double median_column_pitch() const {
         std::vector<double> d;
-        const std::int64_t step = std::max<std::int64_t>(1, n() / 16);
+        const std::int64_t step = std::max<std::int64_t>(1, n() / kPitchProfileShare);
         for (std::int64_t k = 0; k < n(); k += step)
             for (std::int64_t i = 0; i + 1 < w(); ++i)
                 if (valid(k, i) && valid(k, i + 1))
                     d.push_back(std::abs(f_.x(k, i + 1) - f_.x(k, i)));
-        if (d.empty()) return 1.0;
+        if (d.empty()) return kFallbackPitchMm;
         std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
-        return std::max(1e-3, d[d.size() / 2]);
+        return std::max(kMinPitchMm, d[d.size() / 2]);
     }
     double median_profile_pitch() const {
         std::vector<double> d;
         for (std::int64_t k = 0; k + 1 < n(); ++k)
             d.push_back(std::abs(f_.profile_positions_mm[k + 1] - f_.profile_positions_mm[k]));
-        if (d.empty()) return 1.0;
+        if (d.empty()) return kFallbackPitchMm;
         std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
-        return std::max(1e-3, d[d.size() / 2]);
+        return std::max(kMinPitchMm, d[d.size() / 2]);
     }
 
     const core::FaceScan& f_;
@@ -91,7 +105,7 @@ Samples voting_samples(const core::Recording& rec, const core::FaceDisplacements
     Samples out;
     std::unordered_map<std::int64_t, std::uint32_t> taken;
     const float inv = static_cast<float>(1.0 / sampling_mm);
-    const float max_jump = static_cast<float>(3.0 * normal_radius_mm);
+    const float max_jump = static_cast<float>(kMaxJumpRadii * normal_radius_mm);
     for (const auto& face : rec.faces) {
         if (face.width < 3 || face.n_profiles() < 3) continue;
         const FaceGrid g(face, face_u(u, face.name));
@@ -116,7 +130,7 @@ Samples voting_samples(const core::Recording& rec, const core::FaceDisplacements
                         const Eigen::Vector3f p = g.point(kk, ii);
                         if ((p - c).norm() < max_jump) nb[m++] = p;
                     }
-                if (m < 6) continue;
+                if (m < kMinNeighbours) continue;
                 Eigen::Vector3f mean = Eigen::Vector3f::Zero();
                 for (int q = 0; q < m; ++q) mean += nb[q];
                 mean /= static_cast<float>(m);
@@ -125,7 +139,8 @@ Samples voting_samples(const core::Recording& rec, const core::FaceDisplacements
                 Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es;
                 es.computeDirect(C);
                 const Eigen::Vector3f ev = es.eigenvalues();
-                if (ev(0) > 0.05f * ev.sum()) continue;  // not a smooth surface: an edge, a spike
+                // Not a smooth surface: an edge, a spike.
+                if (ev(0) > kMaxFlatness * ev.sum()) continue;
                 Eigen::Vector3f n = es.eigenvectors().col(0);
                 if (n.dot(g.origin(k) - c) < 0) n = -n;
                 taken.emplace(vk, static_cast<std::uint32_t>(out.points.size()));
@@ -152,8 +167,8 @@ std::vector<Eigen::Vector3f> grid_points(const core::Recording& rec,
 
 std::optional<Plane> background_plane(const Samples& s, double band_mm, double min_extent_mm) {
     const std::size_t n = s.points.size();
-    if (n < 50) return std::nullopt;
-    std::mt19937 rng(12345);
+    if (n < kMinPlaneSamples) return std::nullopt;
+    std::mt19937 rng(kPlaneSeed);
     std::uniform_int_distribution<std::size_t> pick(0, n - 1);
     const float band = static_cast<float>(band_mm);
     constexpr float kCosNormal = 0.94f;  // 20°
@@ -166,7 +181,7 @@ std::optional<Plane> background_plane(const Samples& s, double band_mm, double m
     };
     std::optional<Plane> best;
     std::size_t best_count = 0;
-    for (int it = 0; it < 200; ++it) {
+    for (int it = 0; it < kPlaneHypotheses; ++it) {
         // One oriented sample defines a plane; a second must agree with it.
         const std::size_t a = pick(rng), b = pick(rng);
         const Plane pl{s.normals[a], s.normals[a].dot(s.points[a])};
@@ -179,7 +194,7 @@ std::optional<Plane> background_plane(const Samples& s, double band_mm, double m
             best = pl;
         }
     }
-    if (!best || best_count < 50) return std::nullopt;
+    if (!best || best_count < kMinPlaneSamples) return std::nullopt;
     // Least-squares refit on the inliers, then the extent test.
     std::vector<Eigen::Vector3f> in;
     for (std::size_t i = 0; i < n; ++i)

@@ -118,6 +118,10 @@ Ortho ortho(const Shape& g, double s, double h) {
 // wherever the jumps left it: up to 13 µm apart between two convergence tolerances (a forged
 // part's Diameter 5); now 0.001 µm.
 constexpr double kGrazing = 0.2;
+// Newton steps along the ray to the profile at most; converged within kRayTolMm, and the ray
+// meets the profile when it ends within kRayMeetMm of it (not measured).
+constexpr int kRayNewtonSteps = 6;
+constexpr double kRayTolMm = 1e-9, kRayMeetMm = 1e-6;
 double residual(const Shape& shape, double side, const CornerPoint& p, Vec7* grad, int* part) {
     const CornerModel& m = shape.m;
     const Eigen::Vector2d d = p.q - m.centre;
@@ -133,15 +137,15 @@ double residual(const Shape& shape, double side, const CornerPoint& p, Vec7* gra
         double lambda = 0;
         Ortho at = o;
         bool ok = true;
-        for (int it = 0; it < 6 && ok; ++it) {
+        for (int it = 0; it < kRayNewtonSteps && ok; ++it) {
             const double nd = at.n.dot(ray);
             ok = std::abs(nd) >= kGrazing;
             if (!ok) break;
             lambda -= at.e / nd;
             at = ortho(shape, s + lambda * ray.x(), h + lambda * ray.y());
-            if (std::abs(at.e) < 1e-9) break;
+            if (std::abs(at.e) < kRayTolMm) break;
         }
-        if (ok && std::abs(at.n.dot(ray)) >= kGrazing && std::abs(at.e) < 1e-6) {
+        if (ok && std::abs(at.n.dot(ray)) >= kGrazing && std::abs(at.e) < kRayMeetMm) {
             o = at;
             e = -lambda;
             scale = 1.0 / at.n.dot(ray);
@@ -275,8 +279,13 @@ Mat7 normal_for_u(const Normal& raw, const Priors& priors, double rms2, double m
     return A;
 }
 
+// Levenberg–Marquardt steps of a solve at most (not measured).
+constexpr int kMaxSolveSteps = 30;
+// The jackknife's groups start from the whole fit's solution: this many steps reach theirs.
+constexpr int kJackknifeSteps = 3;
+
 Solve solve(const std::vector<CornerPoint>& pts, const std::vector<char>& use, double side, Vec7 x,
-            const CornerPrior& prior, const Thinning& th, int iterations = 30) {
+            const CornerPrior& prior, const Thinning& th, int iterations = kMaxSolveSteps) {
     // Levenberg–Marquardt's damping: its start, its factors on an accepted and a rejected step,
     // its floor, and the ceiling beyond which no step lowers the cost; the damping's floor on a
     // diagonal the samples leave empty.
@@ -334,7 +343,7 @@ double jackknife_u(const std::vector<CornerPoint>& pts, const std::vector<char>&
         for (std::size_t q = 0; q < pts.size(); ++q)
             keep[q] = keep[q] && pts[q].profile % kGroups != g;
         // From the whole fit's solution a few steps reach the group's: they differ by its share.
-        radius[g] = solve(pts, keep, side, x, prior, th, 3).x[2];
+        radius[g] = solve(pts, keep, side, x, prior, th, kJackknifeSteps).x[2];
     }
     double mean = 0, var = 0;
     for (const double r : radius) mean += r / kGroups;
@@ -342,10 +351,15 @@ double jackknife_u(const std::vector<CornerPoint>& pts, const std::vector<char>&
     return std::sqrt(var * (kGroups - 1) / kGroups);
 }
 
+// Floors on the draft prior's σ (tan): a side draft's u, and the drawing's draft range
+// (not measured).
+constexpr double kMinDraftU = 1e-4, kMinDraftRange = 1e-3;
+
 }  // namespace
 
 double CornerPrior::t_sigma() const {
-    return t_known_u ? std::max(*t_known_u, 1e-4) : std::max(t_max, 1e-3) / std::sqrt(12.0);
+    return t_known_u ? std::max(*t_known_u, kMinDraftU)
+                     : std::max(t_max, kMinDraftRange) / std::sqrt(12.0);
 }
 
 double corner_residual(const CornerModel& m, double side, const CornerPoint& p, int* part) {
@@ -386,7 +400,9 @@ bool thinned_in(const std::vector<CornerPoint>& pts, std::size_t q, const Thinni
     h ^= h >> 32;
     return static_cast<double>(h >> 11) * 0x1.0p-53 < keep;
 }
-double inlier_threshold(double rms) { return std::max(3.0 * rms, 0.02); }
+// Inliers: within 3σ of the profile, never tighter than 0.02 mm (not measured).
+constexpr double kInlierK = 3.0, kMinInlierMm = 0.02;
+double inlier_threshold(double rms) { return std::max(kInlierK * rms, kMinInlierMm); }
 
 // `rounds` times: the solve on the thinned samples `use`, then as `use` the thinned samples within
 // the inlier threshold of its solution.
@@ -407,15 +423,23 @@ Solve robust_solve(const std::vector<CornerPoint>& pts, std::vector<char>& use, 
 
 // The radius's standard uncertainty from the normal matrix; infinite where the samples do not fix
 // it (its smallest eigenvalue 1e-14 of its largest, or less).
+constexpr double kUnfixedRel = 1e-14;
 double radius_u(const Solve& s) {
     const Eigen::SelfAdjointEigenSolver<Mat7> eig(s.JtJ);
     const auto& ev = eig.eigenvalues();  // ascending
-    if (eig.info() != Eigen::Success || !(ev[0] > 1e-14 * ev[6]))
+    if (eig.info() != Eigen::Success || !(ev[0] > kUnfixedRel * ev[6]))
         return std::numeric_limits<double>::infinity();
     const Mat7 cov = eig.eigenvectors() * ev.cwiseInverse().asDiagonal() *
                      eig.eigenvectors().transpose() * s.rms * s.rms;
     return std::sqrt(std::max(0.0, cov(2, 2)));
 }
+
+// The sectors' radii: 8 sectors (docs/measurement.md, "Real forgings"), each from at least 10
+// inliers or 1/32 of the fillet's and wall's (not measured).
+constexpr int kSectors = 8, kMinInSector = 10, kSectorShareDivisor = 32;
+// Rounds of solve and inlier selection of a corner's fit (not measured); a refit at a side draft
+// twice (refit_draft).
+constexpr int kRobustRounds = 3, kRefitRounds = 2;
 
 // The fit `s` on the thinned inliers `use` as a CornerFit: inliers of every sample by the part of
 // the profile, sectors, u (formal, or the jackknife's when `jackknife` and larger) and, for a fit
@@ -427,8 +451,8 @@ CornerFit summarize(const std::vector<CornerPoint>& pts, double side, const Solv
     CornerFit out;
     out.m = from(s.x);
     out.rms = s.rms;
-    std::vector<double> sum(8, 0.0);
-    std::vector<int> cnt(8, 0);
+    std::vector<double> sum(kSectors, 0.0);
+    std::vector<int> cnt(kSectors, 0);
     const Shape shape(out.m);
     for (std::size_t q = 0; q < pts.size(); ++q) {  // every sample: inlier, part, sector
         int part = 0;
@@ -443,7 +467,7 @@ CornerFit summarize(const std::vector<CornerPoint>& pts, double side, const Solv
             out.radial.back().second += d.normalized();
         }
         const double turn = (std::atan2(d.y(), d.x()) + std::numbers::pi) / (2 * std::numbers::pi);
-        const int sec = std::min(7, static_cast<int>(turn * 8));
+        const int sec = std::min(kSectors - 1, static_cast<int>(turn * kSectors));
         sum[sec] += side * e;  // samples beyond the profile: a larger circle (outer edge)
         cnt[sec]++;
     }
@@ -458,8 +482,8 @@ CornerFit summarize(const std::vector<CornerPoint>& pts, double side, const Solv
     }
     out.radial.resize(kept);
     const std::int64_t n_profile = out.n_arc + out.n_wall;
-    for (int sec = 0; sec < 8; ++sec)
-        if (cnt[sec] >= std::max<std::int64_t>(10, n_profile / 32))
+    for (int sec = 0; sec < kSectors; ++sec)
+        if (cnt[sec] >= std::max<std::int64_t>(kMinInSector, n_profile / kSectorShareDivisor))
             out.sector_radius.push_back(out.m.radius + sum[sec] / cnt[sec]);
     out.u_radius = radius_u(s);
     if (std::isfinite(out.u_radius)) {
@@ -485,7 +509,7 @@ CornerFit fit_corner(const std::vector<CornerPoint>& pts, double side, const Cor
         if (x[5] <= 0.0) x[5] = 0.5 * prior.rho_max;
         if (x[6] <= 0.0) x[6] = prior.depth;
     }
-    const Solve s = robust_solve(pts, use, side, x, prior, th, 3);
+    const Solve s = robust_solve(pts, use, side, x, prior, th, kRobustRounds);
     return summarize(pts, side, s, use, prior, th, jackknife, jackknife);
 }
 
@@ -502,7 +526,7 @@ CornerFit refit_draft(const std::vector<CornerPoint>& pts, double side, const Co
     x[3] = prior.t_mean();
     // Twice: the held fit's inliers are those of the drawing's draft, which may take in wall
     // samples the side draft puts outside (and the solve on them stops 20-40 µm off).
-    const Solve s = robust_solve(pts, use, side, x, prior, th, 2);
+    const Solve s = robust_solve(pts, use, side, x, prior, th, kRefitRounds);
     CornerFit out = summarize(pts, side, s, use, prior, th, true, false);
     // The jackknife measures the profiles' shared errors, which a change of draft leaves alone.
     out.u_jackknife = held.u_jackknife;

@@ -15,6 +15,19 @@ namespace {
 
 using Pair2d = std::pair<Eigen::Vector2d, Eigen::Vector2d>;
 
+// The fine circle through the bracket midpoints: 3σ rejection, never tighter than 0.02 mm (the
+// brackets missed by more are misclassified samples, docs/measurement.md "Edges and circles").
+constexpr RejectOptions kFineReject{3.0, 0.02, 10};
+// Arc coverage in 36 bins of 10° (not measured).
+constexpr int kArcBins = 36;
+constexpr double kArcBinDeg = 10.0;
+// A sector's diameter counts from at least this many midpoints, or a quarter of an even share
+// (not measured).
+constexpr int kMinInSector = 5, kSectorShareDivisor = 4;
+// On a partial arc, the free fit may disagree by its 3 u, or the configured limit
+// (docs/measurement.md: max(0.05 mm, 3 u)).
+constexpr double kDisagreementK = 3.0;
+
 // On-plane samples near the expected edge radius (the bracket seeds, per face) and, among them,
 // the coarse edge points: a grid normal leaving the plane normal (paper §4.3.2) or a neighbour
 // beyond the plane.
@@ -127,7 +140,7 @@ std::optional<FineEdge> fine_edge(const Context& ctx, const core::FeatureSpec& f
                   " needed (" + profile_span(frames, seeds) + ")";
             return std::nullopt;
         }
-        auto fit = fit_circle_robust(mids, {3.0, 0.02, 10});
+        auto fit = fit_circle_robust(mids, kFineReject);
         if (!fit) {
             why = "edge circle: " + fit.error().message;
             return std::nullopt;
@@ -163,22 +176,23 @@ double edge_drift_u(const std::vector<const FaceFrame*>& frames, const EdgePlane
 // Arc coverage in 10° bins and the sector diameters (multiple sampling, paper §4.3).
 void coverage(const Context& ctx, const FineEdge& fe, FeatureResult& r,
               std::vector<double>& sector_d) {
-    std::vector<int> bins(36, 0);
+    std::vector<int> bins(kArcBins, 0);
     const int ns = std::max(1, ctx.c.sectors);
     std::vector<double> ssum(ns, 0.0);
     std::vector<int> scnt(ns, 0);
     for (const auto& m : fe.midpoints) {
         const Eigen::Vector2d d = m - fe.fit.center;
         const double turn = (std::atan2(d.y(), d.x()) + std::numbers::pi) / (2 * std::numbers::pi);
-        bins[std::min(35, static_cast<int>(turn * 36))]++;
+        bins[std::min(kArcBins - 1, static_cast<int>(turn * kArcBins))]++;
         const int s = std::min(ns - 1, static_cast<int>(turn * ns));
         ssum[s] += d.norm();
         scnt[s]++;
     }
     int covered = 0;
     for (int b : bins) covered += b > 0;
-    r.arc_deg = 10.0 * covered;
-    const int min_in_sector = std::max(5, static_cast<int>(fe.fit.n_points / (4 * ns)));
+    r.arc_deg = kArcBinDeg * covered;
+    const int min_in_sector =
+        std::max(kMinInSector, static_cast<int>(fe.fit.n_points / (kSectorShareDivisor * ns)));
     for (int s = 0; s < ns; ++s)
         if (scnt[s] >= min_in_sector) sector_d.push_back(2.0 * ssum[s] / scnt[s]);
 }
@@ -204,7 +218,8 @@ bool partial_arc_radius(const Context& ctx, const core::FeatureSpec& f, const Ed
     // The free fit's disagreement carries the pose's axis error: it enters u in full, and beyond
     // what the free fit's own noise explains the value is not trusted at all.
     const double disagreement = std::abs(e.value - bc.radius);
-    const double limit = std::max(ctx.c.max_partial_arc_disagreement_mm, 3.0 * fe.fit.u_radius_mm);
+    const double limit =
+        std::max(ctx.c.max_partial_arc_disagreement_mm, kDisagreementK * fe.fit.u_radius_mm);
     if (disagreement > limit) {
         r.reason = "edge of '" + f.section + "' on " + std::to_string(static_cast<int>(r.arc_deg)) +
                    "° of arc: centred on the part axis its radius differs by " +

@@ -6,6 +6,20 @@
 #include <cmath>
 
 namespace hotgauge::measure::detail {
+namespace {
+
+// The grid neighbourhood of a sample's normal: 5×5 samples (docs/measurement.md, "Edges and
+// circles"), of which at least this many valid for a PCA normal (not measured).
+constexpr std::int64_t kGridHalf = 2;
+constexpr int kMinNormalSamples = 6;
+// Rounds of robust_mean's rejection at most (not measured).
+constexpr int kMeanRounds = 10;
+// Brackets that may miss the stabbed region (misclassified samples): 2 % (docs/measurement.md,
+// "Edges and circles"), and the 3σ rejection of the other robust fits (fit.hpp) for the
+// midpoints' spread.
+constexpr double kStabMissFraction = 0.02, kMidpointRejectK = 3.0;
+
+}  // namespace
 
 double cross_plane(const PlaneFit& pl, const Eigen::Vector3d& o, const Eigen::Vector3d& d) {
     const double den = pl.normal.dot(d);
@@ -26,15 +40,15 @@ std::optional<Eigen::Vector3d> grid_normal(const FaceFrame& fr, std::int64_t k, 
     Eigen::Vector3d mean = Eigen::Vector3d::Zero();
     Eigen::Matrix3d S = Eigen::Matrix3d::Zero();
     int cnt = 0;
-    for (std::int64_t dk = -2; dk <= 2; ++dk)
-        for (std::int64_t di = -2; di <= 2; ++di) {
+    for (std::int64_t dk = -kGridHalf; dk <= kGridHalf; ++dk)
+        for (std::int64_t di = -kGridHalf; di <= kGridHalf; ++di) {
             if (!fr.valid(k + dk, i + di)) continue;
             const Eigen::Vector3d p = fr.point(k + dk, i + di);
             mean += p;
             S += p * p.transpose();
             ++cnt;
         }
-    if (cnt < 6) return std::nullopt;
+    if (cnt < kMinNormalSamples) return std::nullopt;
     mean /= cnt;
     S = S / cnt - mean * mean.transpose();
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(S);
@@ -45,8 +59,8 @@ std::optional<Eigen::Vector3d> grid_normal(const FaceFrame& fr, std::int64_t k, 
 // plane's, no need to compute it.
 bool flat_around(const FaceFrame& fr, const PlaneFit& plane, double thr, std::int64_t k,
                  std::int64_t i) {
-    for (std::int64_t dk = -2; dk <= 2; ++dk)
-        for (std::int64_t di = -2; di <= 2; ++di)
+    for (std::int64_t dk = -kGridHalf; dk <= kGridHalf; ++dk)
+        for (std::int64_t di = -kGridHalf; di <= kGridHalf; ++di)
             if (fr.valid(k + dk, i + di) &&
                 std::abs(plane.distance(fr.point(k + dk, i + di))) > thr)
                 return false;
@@ -66,7 +80,7 @@ double sample_std(const std::vector<double>& v) {
 MeanFit robust_mean(const std::vector<double>& v, double k_sigma) {
     MeanFit r;
     std::vector<std::uint8_t> in(v.size(), 1);
-    for (int round = 0; round < 10; ++round) {
+    for (int round = 0; round < kMeanRounds; ++round) {
         double s = 0, s2 = 0;
         std::int64_t n = 0;
         for (std::size_t j = 0; j < v.size(); ++j)
@@ -109,8 +123,9 @@ IntervalEstimate stab(const std::vector<Interval>& iv) {
     int depth = 0, best = 0;
     for (const auto& [x, d] : ev) best = std::max(best, depth += d);
     // Tolerate a few brackets that miss (misclassified samples): the region at depth ≥ target.
-    const int target =
-        std::max(1, best - std::max(1, static_cast<int>(0.02 * static_cast<double>(iv.size()))));
+    const int may_miss =
+        std::max(1, static_cast<int>(kStabMissFraction * static_cast<double>(iv.size())));
+    const int target = std::max(1, best - may_miss);
     double lo = kNaN, hi = kNaN, best_width = -1;
     depth = 0;
     double start = kNaN;
@@ -127,7 +142,7 @@ IntervalEstimate stab(const std::vector<Interval>& iv) {
     e.value = 0.5 * (lo + hi);
     e.u = (hi - lo) / std::sqrt(12.0);
     for (const auto& v : iv) e.n_used += v.lo <= hi && v.hi >= lo;
-    e.midpoint_std = robust_mean(mids, 3.0).std;
+    e.midpoint_std = robust_mean(mids, kMidpointRejectK).std;
     return e;
 }
 

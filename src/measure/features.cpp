@@ -19,6 +19,11 @@ using core::FeatureSpec;
 // A pyrometer reading outside this is a fault, not a temperature (forging: 700–1300 °C).
 constexpr double kMinTemperatureC = -50.0;
 constexpr double kMaxTemperatureC = 1600.0;
+// The faces keep samples this far (hot, mm) beyond the part's grown bounds: the part's bounding
+// cylinder +5 mm (docs/measurement.md, "Preparation"; not measured).
+constexpr double kBoundsMarginMm = 5.0;
+// The growth's relative slack at a measured temperature: the α model's error (not measured).
+constexpr double kAlphaModelSlack = 0.002;
 
 // The prepared faces a feature may use, by name.
 using FrameRefs = std::map<std::string, const detail::FaceFrame*>;
@@ -82,7 +87,7 @@ Bounds part_bounds(const detail::Context& ctx) {
         z_min = std::min(z_min, z);
         z_max = std::max(z_max, z);
     }
-    const double margin = 5.0;
+    const double margin = kBoundsMarginMm;
     const double gmax = ctx.ex.g * (1.0 + ctx.ex.slack);
     return {ctx.solid.max_radius() * gmax + margin, std::min(z_min, z_min * gmax) - margin,
             std::max(z_max, z_max * gmax) + margin};
@@ -166,7 +171,7 @@ detail::Expect expect(const core::Recipe& recipe, const core::Recording& rec,
         *rec.temperature_c <= kMaxTemperatureC) {
         growth = recipe.material.growth(*rec.temperature_c);
         ex.g = *growth;
-        ex.slack = 0.002;  // α model error
+        ex.slack = kAlphaModelSlack;
     } else {
         ex.g = 1.0 + 0.5 * config.unknown_growth;
         ex.slack = 0.5 * config.unknown_growth;

@@ -14,6 +14,14 @@
 namespace hotgauge::measure {
 namespace {
 
+// A scatter whose second principal spread is below this share of the largest (the circle's 2x2
+// determinant against scale⁴, the plane's eigenvalues) is collinear: rounding, not a spread
+// (not measured).
+constexpr double kCollinearRel = 1e-12;
+// Newton steps on Taubin's characteristic polynomial at most; it stops sooner when a step no
+// longer decreases it (not measured).
+constexpr int kTaubinNewtonSteps = 100;
+
 double sq(double x) { return x * x; }
 
 template <class Vec>
@@ -101,7 +109,7 @@ core::Result<Taubin> taubin(std::span<const Eigen::Vector2d> points, const Eigen
     const double scale2 = mxx + myy;
     if (!(scale2 > 0.0)) return core::make_error("circle fit: all points coincide");
     // Collinear points: the 2x2 scatter is rank 1 and the algebraic system is singular.
-    if (mxx * myy - mxy * mxy <= 1e-12 * scale2 * scale2)
+    if (mxx * myy - mxy * mxy <= kCollinearRel * scale2 * scale2)
         return core::make_error("circle fit: points are collinear");
     const double s = std::sqrt(scale2);
     mxx = 0, myy = 0, mxy = 0;
@@ -126,7 +134,7 @@ core::Result<Taubin> taubin(std::span<const Eigen::Vector2d> points, const Eigen
     const double a0 =
         mxz * (mxz * myy - myz * mxy) + myz * (myz * mxx - mxz * mxy) - var_z * cov_xy;
     double x = 0.0, y = a0;
-    for (int it = 0; it < 100; ++it) {
+    for (int it = 0; it < kTaubinNewtonSteps; ++it) {
         const double dy = a1 + x * (2.0 * a2 + 3.0 * a3 * x);
         const double x_new = x - y / dy;
         if (x_new == x || !std::isfinite(x_new)) break;
@@ -323,7 +331,8 @@ core::Result<PlaneFit> fit_plane(std::span<const Eigen::Vector3d> points) {
     if (eig.info() != Eigen::Success) return core::make_error("plane fit: eigen solver failed");
     const Eigen::Vector3d lambda = eig.eigenvalues();  // ascending
     if (!(lambda[2] > 0.0)) return core::make_error("plane fit: all points coincide");
-    if (lambda[1] <= 1e-12 * lambda[2]) return core::make_error("plane fit: points are collinear");
+    if (lambda[1] <= kCollinearRel * lambda[2])
+        return core::make_error("plane fit: points are collinear");
     PlaneFit f;
     f.point = c;
     f.normal = eig.eigenvectors().col(0).normalized();

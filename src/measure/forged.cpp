@@ -45,6 +45,34 @@ constexpr std::int64_t kSampleKeyFace = 1'000'000'000'000;
 constexpr std::int64_t kMinWallSamples = 150;
 // The profile's samples scatter by the range noise (0.05 mm); far more is not this corner.
 constexpr double kMaxRmsMm = 0.2;
+// The wall's plain cone ends this far clear of its other end's fillet, or of the parting plane
+// (docs/measurement.md, "Real forgings"; the margins not measured).
+constexpr double kClearOfFilletMm = 0.5, kClearOfPartingMm = 1.0;
+// A short step: its other level within two of this edge's fillets and this (docs/measurement.md:
+// hub-a's recess, 5 mm, and spigot nose, 8 mm, are in).
+constexpr double kShortStepExtraMm = 4.0;
+// The far level must be this much wider than its fillet to be seen past it (not measured).
+constexpr double kFarFlatMm = 1.0;
+// The z band gathered around the window's ends before h and s select in it (not measured).
+constexpr double kGatherMarginMm = 1.0;
+// The window reaches this far beyond the wall's foot at the drawing's steepest draft, and the
+// far level's samples this far below it (not measured).
+constexpr double kBeyondWallMm = 0.5, kBelowStepMm = 0.5;
+// A fit is refused past the drawing by more than 1° of draft or 20 % + 0.2 mm of fillet (not
+// measured), or off the axis by more than twice the window (docs/measurement.md, "Refused").
+constexpr double kDraftSlackDeg = 1.0, kFilletSlackFactor = 1.2, kFilletSlackMm = 0.2;
+constexpr double kOffAxisWindows = 2.0;
+// A short step's far level in the window: 1.5 mm of it, and 4 mm for the `model` term
+// (docs/measurement.md, "A short step's two fillets").
+constexpr double kFarLevelNearMm = 1.5, kFarLevelWideMm = 4.0;
+// The plane faces' corner window inside the circle: past the drawing's fillet by this on the
+// first pass (with the sorting gauge's window), then ±1.5 mm around the fitted fillet
+// (docs/measurement.md, "Real forgings").
+constexpr double kFirstPassInMm = 1.0, kSecondPassInMm = 1.5;
+// The die shift: one half's axis must span this to fix the halves' common direction
+// (docs/measurement.md, "Die shift"), and u² is floored at this in the 1/u² weights so that no
+// circle takes all the weight (not measured).
+constexpr double kMinAxisSpanMm = 5.0, kMinCentreU2Mm2 = 1e-8;
 
 // How far down the wall (hot, mm from the level) is plain cone: to the section's other level's
 // fillet, or to the parting plane, where the drafts change direction and the die shift steps.
@@ -52,11 +80,11 @@ double wall_depth(const Context& ctx, const core::FeatureSpec& f) {
     const core::Section* s = ctx.recipe.section(f.section);
     const std::string& other = f.edge_at == s->from_level ? s->to_level : s->from_level;
     const double z_e = ctx.level_z(f.edge_at);
-    double z_o = ctx.level_z(other), stop = ctx.recipe.fillet_at(other) + 0.5;
+    double z_o = ctx.level_z(other), stop = ctx.recipe.fillet_at(other) + kClearOfFilletMm;
     const double zp = ctx.recipe.forging->parting_z_mm;
     if ((zp - z_e) * (zp - z_o) < 0.0) {
         z_o = zp;
-        stop = 1.0;
+        stop = kClearOfPartingMm;
     }
     return std::max(0.0, std::abs(z_o - z_e) - stop) * ctx.ex.g;
 }
@@ -71,7 +99,7 @@ double step_depth(const Context& ctx, const core::FeatureSpec& f, double side) {
     const double z_e = ctx.level_z(f.edge_at), z_o = ctx.level_z(other);
     const double zp = ctx.recipe.forging->parting_z_mm;
     const double D = std::abs(z_o - z_e);
-    if ((zp - z_e) * (zp - z_o) < 0.0 || D > 2.0 * rho_max + 4.0) return 0.0;
+    if ((zp - z_e) * (zp - z_o) < 0.0 || D > 2.0 * rho_max + kShortStepExtraMm) return 0.0;
     // This level's face runs inside the corner circle, the other's beyond it, both facing alike
     // and the other wide enough to be seen past its fillet.
     const auto face_at = [&](double z, bool beyond) -> std::optional<Annulus> {
@@ -81,7 +109,7 @@ double step_depth(const Context& ctx, const core::FeatureSpec& f, double side) {
     };
     const auto here = face_at(z_e, false), there = face_at(z_o, true);
     if (!here || !there || here->facing != there->facing ||
-        there->hi - there->lo < ctx.recipe.fillet_at(other) + 1.0)
+        there->hi - there->lo < ctx.recipe.fillet_at(other) + kFarFlatMm)
         return 0.0;
     return D * ctx.ex.g;
 }
@@ -95,10 +123,12 @@ std::vector<CornerPoint> corner_points(const std::vector<const FaceFrame*>& fram
     const double nz = std::abs(ep.plane.normal.z()), z0 = ep.plane.point.z();
     const double up = ep.plane.normal.z() > 0 ? 1.0 : -1.0;
     const double za = z0 - up * depth * nz, zb = z0 + up * kAbove;
+    const double z_from = std::min(za, zb) - kGatherMarginMm,
+                 z_to = std::max(za, zb) + kGatherMarginMm;
     std::vector<CornerPoint> out;
     for (std::size_t face = 0; face < frames.size(); ++face) {
         const FaceFrame* fr = frames[face];
-        fr->for_z(std::min(za, zb) - 1.0, std::max(za, zb) + 1.0, [&](const FaceFrame::Near& n) {
+        fr->for_z(z_from, z_to, [&](const FaceFrame::Near& n) {
             const Eigen::Vector3d p = n.p.cast<double>();
             const double h = ep.plane.distance(p);
             if (h < -depth || h > kAbove) return;
@@ -124,8 +154,10 @@ std::vector<CornerPoint> corner_points(const std::vector<const FaceFrame*>& fram
 // as dense as the plane's: a few hundred samples strewn over a sharp edge's shadow are not one.
 bool fillet_seen(const CornerFit& fit, double s_in) {
     constexpr double kMinDensityRatio = 0.3;
-    const double arc_width = std::max(fit.m.rho, 0.05);
-    const double plane_width = std::max(s_in - arc_width, 0.5);
+    // Floors on the widths the densities are taken over (not measured).
+    constexpr double kMinArcWidthMm = 0.05, kMinPlaneWidthMm = 0.5;
+    const double arc_width = std::max(fit.m.rho, kMinArcWidthMm);
+    const double plane_width = std::max(s_in - arc_width, kMinPlaneWidthMm);
     return static_cast<double>(fit.n_arc + fit.n_wall) / arc_width >=
            kMinDensityRatio * static_cast<double>(fit.n_plane) / plane_width;
 }
@@ -140,12 +172,13 @@ std::string refusal(const CornerFit& fit, const CornerPrior& prior, double R_e, 
         return "its samples lie " + std::to_string(fit.rms) +
                " mm RMS off the corner's profile: wrong pose or wrong part";
     if (!std::isfinite(fit.u_radius)) return "its samples do not fix the corner's circle";
-    const double t_limit = std::tan(std::atan(prior.t_max) + 1.0 / kRadToDeg);
-    if (m.rho > 1.2 * prior.rho_max + 0.2 || m.t > t_limit)
+    const double t_limit = std::tan(std::atan(prior.t_max) + kDraftSlackDeg / kRadToDeg);
+    if (m.rho > kFilletSlackFactor * prior.rho_max + kFilletSlackMm || m.t > t_limit)
         return "fitted fillet R " + std::to_string(m.rho) + " mm, draft " +
                std::to_string(std::atan(m.t) * kRadToDeg) +
                "°, outside the drawing's (R <= " + std::to_string(prior.rho_max) + " mm)";
-    if (std::abs(m.radius - R_e) > 2.0 * slack || (m.centre - axis).norm() > 2.0 * slack)
+    if (std::abs(m.radius - R_e) > kOffAxisWindows * slack ||
+        (m.centre - axis).norm() > kOffAxisWindows * slack)
         return "fitted at radius " + std::to_string(m.radius) + " mm, " +
                std::to_string((m.centre - axis).norm()) +
                " mm off the part axis: wrong pose or wrong part";
@@ -164,14 +197,18 @@ std::optional<Draft> wall_draft(const std::vector<const FaceFrame*>& wall_frames
                                 double depth, double t_max) {
     constexpr std::size_t kMinSamples = 200;
     constexpr double kMinSpanMm = 2.0, kBandMm = 0.5;
-    const double h_top = -(m.rho + 0.5), h_bottom = -depth;
+    // The straight part starts this far below the fillet; rounds of fit and 3σ rejection, with a
+    // floor on the rejection distance (not measured).
+    constexpr double kBelowFilletMm = 0.5, kRejectK = 3.0, kRejectFloorMm = 0.02;
+    constexpr int kRounds = 3;
+    const double h_top = -(m.rho + kBelowFilletMm), h_bottom = -depth;
     if (wall_frames.empty() || h_top - h_bottom < kMinSpanMm) return std::nullopt;
     const auto pts = corner_points(wall_frames, ep, side, m.centre, m.radius, kBandMm,
                                    kBandMm + t_max * depth, depth);
     std::vector<Eigen::Vector2d> sh;  // (h, s) on the wall's straight part
     for (const auto& p : pts)
         if (p.h <= h_top) sh.emplace_back(p.h, side * ((p.q - m.centre).norm() - m.radius));
-    for (int round = 0; round < 3; ++round) {
+    for (int round = 0; round < kRounds; ++round) {
         if (sh.size() < kMinSamples) return std::nullopt;
         Eigen::Matrix2d A = Eigen::Matrix2d::Zero();
         Eigen::Vector2d b = Eigen::Vector2d::Zero();
@@ -184,9 +221,10 @@ std::optional<Draft> wall_draft(const std::vector<const FaceFrame*>& wall_frames
         double sse = 0;
         for (const auto& v : sh) sse += std::pow(v.y() - k[0] - k[1] * v.x(), 2);
         const double sigma = std::sqrt(sse / static_cast<double>(sh.size() - 2));
-        if (round == 2) return Draft{-k[1], sigma * std::sqrt(A.inverse()(1, 1))};
+        if (round == kRounds - 1) return Draft{-k[1], sigma * std::sqrt(A.inverse()(1, 1))};
         std::erase_if(sh, [&](const Eigen::Vector2d& v) {
-            return std::abs(v.y() - k[0] - k[1] * v.x()) > std::max(3.0 * sigma, 0.02);
+            return std::abs(v.y() - k[0] - k[1] * v.x()) >
+                   std::max(kRejectK * sigma, kRejectFloorMm);
         });
     }
     return std::nullopt;
@@ -227,11 +265,11 @@ CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
         // The far fillet and 1.5 mm of the far level in the window; again with 4 mm, for how
         // much the result leans on the model's shape. One gathering, the first a part of it.
         const double s_far = prior.t_max * step + prior.rho_max;
-        const auto wide =
-            corner_points(frames, ep, side, m.centre, m.radius, memo.s_in, s_far + 4.0, step + 0.5);
+        const auto wide = corner_points(frames, ep, side, m.centre, m.radius, memo.s_in,
+                                        s_far + kFarLevelWideMm, step + kBelowStepMm);
         std::vector<CornerPoint> near;
         std::copy_if(wide.begin(), wide.end(), std::back_inserter(near), [&](const CornerPoint& p) {
-            return side * ((p.q - m.centre).norm() - m.radius) <= s_far + 1.5;
+            return side * ((p.q - m.centre).norm() - m.radius) <= s_far + kFarLevelNearMm;
         });
         prior.depth = step;
         CornerFit far = fit_corner(near, side, m, prior);
@@ -252,7 +290,7 @@ CornerFit fit_hidden_wall(const std::vector<const FaceFrame*>& frames,
     prior.fix_draft = true;
     if (!memo.held) {  // at the drawing's draft: the same start whichever wall faces are in
         memo.held_pts = corner_points(frames, ep, side, m.centre, m.radius, memo.s_in,
-                                      0.5 + prior.t_max * depth, depth);
+                                      kBeyondWallMm + prior.t_max * depth, depth);
         memo.held =
             fit_corner(memo.held_pts, side, {m.centre, m.radius, prior.t_mean(), m.rho}, prior);
     }
@@ -280,10 +318,10 @@ CornerMemo plane_faces_corner(const Context& ctx, const core::FeatureSpec& f,
     CornerModel m{ep.axis2d(), R_e, 0.5 * prior.t_max, 0.5 * prior.rho_max};
     std::vector<CornerPoint> pts;
     for (int pass = 0; pass < 2; ++pass) {
-        out.s_in = pass == 0 ? prior.rho_max + 1.0 + slack : m.rho + 1.5;
+        out.s_in = pass == 0 ? prior.rho_max + kFirstPassInMm + slack : m.rho + kSecondPassInMm;
         const double s_beyond = pass == 0 ? slack : 0.0;
         pts = corner_points(frames, ep, side, m.centre, m.radius, out.s_in,
-                            s_beyond + 0.5 + prior.t_max * out.depth, out.depth);
+                            s_beyond + kBeyondWallMm + prior.t_max * out.depth, out.depth);
         // Nothing beyond the plane (a sharp edge over a wall no sensor of the plane sees: every
         // edge of an ideal part): the edge brackets, without a profile fit that would say so.
         out.brackets = pass == 0 && std::count_if(pts.begin(), pts.end(), [](const CornerPoint& p) {
@@ -364,7 +402,7 @@ void measure_die_shift(const Context& ctx, const std::vector<FeatureResult>& mea
         if (f.kind != core::FeatureKind::kDiameter || !f.hot_mm || !f.centre_mm) continue;
         const Eigen::Vector3d& c = *f.centre_mm;
         const int half = c.z() > zp ? 0 : 1;
-        const double w = 1.0 / std::max(f.u_mm * f.u_mm, 1e-8);
+        const double w = 1.0 / std::max(f.u_mm * f.u_mm, kMinCentreU2Mm2);
         Eigen::Vector3d row = Eigen::Vector3d::Zero();
         row[half] = 1.0;
         row[2] = c.z();
@@ -376,7 +414,7 @@ void measure_die_shift(const Context& ctx, const std::vector<FeatureResult>& mea
         z_lo[half] = std::min(z_lo[half], c.z());
         z_hi[half] = std::max(z_hi[half], c.z());
     }
-    if (n[0] < 1 || n[1] < 1 || std::max(z_hi[0] - z_lo[0], z_hi[1] - z_lo[1]) < 5.0) {
+    if (n[0] < 1 || n[1] < 1 || std::max(z_hi[0] - z_lo[0], z_hi[1] - z_lo[1]) < kMinAxisSpanMm) {
         r.reason = "die shift: needs measured circles on both halves (upper " +
                    std::to_string(n[0]) + ", lower " + std::to_string(n[1]) +
                    ") and 5 mm of axis within one half";

@@ -5,6 +5,11 @@
 namespace hotgauge::measure::detail {
 namespace {
 
+// A column's slope is fitted from at least this many samples spread over at least this depth
+// variance (mm²); others take their neighbours' slope (not measured).
+constexpr int kMinSlopeSamples = 10;
+constexpr double kMinSlopeVarZMm2 = 1.0;
+
 // Per-column sums of the camera-frame samples, for the least-squares ray line x = a + b·z of
 // each column. A sensor computes (x, z) from (column, row) through its calibration, so every
 // sample of a column lies on that column's ray whatever it hit: one pass, no outliers to reject.
@@ -31,7 +36,8 @@ void fit_columns(const std::vector<ColumnSums>& sums, std::vector<double>& a,
         mean_x[i] = c.sx / c.s;
         mean_z[i] = c.sz / c.s;
         const double var_z = c.szz / c.s - mean_z[i] * mean_z[i];
-        if (c.s < 10 || var_z < 1.0) continue;  // too little depth spread to see the slope
+        // Too little depth spread to see the slope:
+        if (c.s < kMinSlopeSamples || var_z < kMinSlopeVarZMm2) continue;
         b[i] = (c.szx / c.s - mean_x[i] * mean_z[i]) / var_z;
         a[i] = mean_x[i] - b[i] * mean_z[i];
     }

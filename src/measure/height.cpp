@@ -19,6 +19,19 @@ using Segment = core::AxisymmetricSolid::Segment;
 // A wall whose lowest sample lies farther above its standing level than this does not stand on
 // the plate (a few samples' spacing along the laser line, plus noise).
 constexpr double kMaxRimGapMm = 0.5;
+// A floor on a plane's point spread (mm² per in-plane direction), so that points in one spot
+// give a finite lever term (not measured).
+constexpr double kMinSpread2Mm2 = 1e-6;
+// The 3σ rejection of the other robust fits (fit.hpp), for the wall's radius.
+constexpr double kWallRejectK = 3.0;
+// The support plate is fitted out to this beyond the part's largest radius (hot, mm), as the
+// part's bounding cylinder (docs/measurement.md; not measured).
+constexpr double kPlateBeyondPartMm = 5.0;
+// The wall's lowest sample is looked for within this of where it would stand (not measured).
+constexpr double kRimSearchMm = 2.0;
+// A sector with fewer brackets or plane points than this on either end is left out of the
+// sectors' spread (not measured).
+constexpr int kMinPerSector = 10;
 
 // One end of a height: what the JSON reports, and the geometry the height is taken from.
 struct LevelEnd {
@@ -39,7 +52,7 @@ double plane_u_at(const PlaneResult& pl, const Eigen::Vector3d& p) {
     const double n = static_cast<double>(std::max<std::int64_t>(pl.fit.n_points, 1));
     double spread2 = 0;
     for (const auto& q : pl.points) spread2 += (q - pl.fit.point).squaredNorm();
-    spread2 = std::max(spread2 / n / 2.0, 1e-6);  // per in-plane direction
+    spread2 = std::max(spread2 / n / 2.0, kMinSpread2Mm2);  // per in-plane direction
     const Eigen::Vector3d d = p - pl.fit.point;
     const double lever2 = (d - pl.fit.normal * pl.fit.normal.dot(d)).squaredNorm();
     return pl.fit.rms_mm / std::sqrt(n) * std::sqrt(1.0 + lever2 / spread2);
@@ -112,7 +125,7 @@ std::optional<WallFit> fit_wall(const Context& ctx, const std::vector<const Face
               " points where it should be";
         return std::nullopt;
     }
-    w.radius = robust_mean(radii, 3.0);
+    w.radius = robust_mean(radii, kWallRejectK);
     w.thr = surface_threshold(w.radius.std, ctx.c);
     w.phi = std::atan2(sy, sx);
     return w;
@@ -158,8 +171,8 @@ std::optional<LevelEnd> support_end(const Context& ctx, const std::string& level
     const double m = ctx.c.support_margin_mm;
     const PlaneResult pl = fit_level_plane(frames, ctx.ex.z(L), ctx.ex.tol(ctx.c.plane_band_mm, L),
                                            ctx.ex.z(wall.value) + ctx.ex.tol(m, wall.value),
-                                           ctx.ex.z(ctx.solid.max_radius()) + 5.0, ctx.c,
-                                           "support plate at level '" + level + "'");
+                                           ctx.ex.z(ctx.solid.max_radius()) + kPlateBeyondPartMm,
+                                           ctx.c, "support plate at level '" + level + "'");
     if (!pl.error.empty()) {
         why = pl.error;
         return std::nullopt;
@@ -173,7 +186,7 @@ std::optional<LevelEnd> support_end(const Context& ctx, const std::string& level
     const double thr = surface_threshold(plate.rms_mm, ctx.c);
     double lowest = std::numeric_limits<double>::max();
     for (const auto* fr : frames)
-        fr->for_z(z_end - 2.0, z_end + 2.0, [&](const FaceFrame::Near& s) {
+        fr->for_z(z_end - kRimSearchMm, z_end + kRimSearchMm, [&](const FaceFrame::Near& s) {
             if (std::abs(s.r - R) <= w.thr && plate.distance(s.p.cast<double>()) > thr)
                 lowest = std::min(lowest, static_cast<double>(s.p.z()));
         });
@@ -343,7 +356,7 @@ void edge_sectors(const Context& ctx, const LevelEnd (&e)[2], FeatureResult& r) 
                 if (std::min(ns - 1, static_cast<int>((e[j].angles[q] - lo) / (hi - lo + 1e-12) *
                                                       ns)) == sec)
                     part[j].push_back(e[j].intervals[q]);
-        if (part[0].size() < 10 || part[1].size() < 10) continue;
+        if (part[0].size() < kMinPerSector || part[1].size() < kMinPerSector) continue;
         const IntervalEstimate a = stab(part[0]), b = stab(part[1]);
         hs.push_back(std::abs(b.value - a.value));
         us.push_back(std::hypot(a.u, b.u));
@@ -420,7 +433,8 @@ void plane_sectors(const Context& ctx, const PlaneResult (&pl)[2], FeatureResult
     }
     std::vector<double> hs;
     for (int s = 0; s < ns; ++s)
-        if (na[s] >= 10 && nb[s] >= 10) hs.push_back(std::abs(sb[s] / nb[s] - sa[s] / na[s]));
+        if (na[s] >= kMinPerSector && nb[s] >= kMinPerSector)
+            hs.push_back(std::abs(sb[s] / nb[s] - sa[s] / na[s]));
     r.n_sectors = static_cast<int>(hs.size());
     if (hs.size() >= 2) r.sector_spread_mm = sample_std(hs);
 }

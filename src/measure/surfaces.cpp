@@ -128,6 +128,8 @@ double profile_scatter(const PlaneResult& pl) {
     const std::vector<std::int64_t>& key = pl.profile_keys;
     const PlaneFit& plane = pl.fit;
     constexpr std::size_t kMinPointsPerProfile = 20;
+    // With fewer profiles than this the scatter is taken as 0 (not measured).
+    constexpr int kMinProfiles = 10;
     std::vector<std::size_t> order(points.size());
     for (std::size_t q = 0; q < order.size(); ++q) order[q] = q;
     std::sort(order.begin(), order.end(), [&](auto a, auto b) { return key[a] < key[b]; });
@@ -150,7 +152,7 @@ double profile_scatter(const PlaneResult& pl) {
         }
         a = b;
     }
-    if (profiles < 10) return 0.0;
+    if (profiles < kMinProfiles) return 0.0;
     return std::sqrt(std::max(0.0, (s_mean2 - s_noise2) / static_cast<double>(profiles)));
 }
 
@@ -160,7 +162,8 @@ namespace {
 // cone (b) or a bend (c) across the face beyond 4σ and 4 µm over its width is no flat face, but
 // fillets meeting on a face narrower than they are (the bore step, 0.3 mm flat).
 bool curved_across(const PlaneResult& pl) {
-    constexpr double kMinSagMm = 0.004;
+    // 4 µm and 4σ, as the bins' kMinOffMm and kOffSigma below.
+    constexpr double kMinSagMm = 0.004, kSagSigma = 4.0;
     const auto n = static_cast<double>(pl.points.size());
     double r_mean = 0;
     for (const auto& p : pl.points) r_mean += p.head<2>().norm() / n;
@@ -177,9 +180,9 @@ bool curved_across(const PlaneResult& pl) {
     const Eigen::Matrix3d cov = A.inverse() * pl.fit.rms_mm * pl.fit.rms_mm;
     const Eigen::Vector3d k = A.ldlt().solve(b);
     const bool cone =
-        std::abs(k[1]) > 4.0 * std::sqrt(cov(1, 1)) && std::abs(k[1]) * half > kMinSagMm;
-    const bool bend =
-        std::abs(k[2]) > 4.0 * std::sqrt(cov(2, 2)) && std::abs(k[2]) * half * half > kMinSagMm;
+        std::abs(k[1]) > kSagSigma * std::sqrt(cov(1, 1)) && std::abs(k[1]) * half > kMinSagMm;
+    const bool bend = std::abs(k[2]) > kSagSigma * std::sqrt(cov(2, 2)) &&
+                      std::abs(k[2]) * half * half > kMinSagMm;
     return cone || bend;
 }
 

@@ -104,7 +104,7 @@ core::Result<void> read_lines(std::string_view text, const std::filesystem::path
         ++out.lines;
         PartRecord p;
         try {
-            p = part_of(json::parse(line, keep));
+            p = parse_result_line(line);
         } catch (const json::exception& e) {
             std::string why =
                 path.string() + ":" + std::to_string(n) + ": not a result line: " + e.what();
@@ -125,7 +125,7 @@ core::Result<void> read_lines(std::string_view text, const std::filesystem::path
 
 }  // namespace
 
-PartRecord parse_result_line(const std::string& line) { return part_of(json::parse(line, keep)); }
+PartRecord parse_result_line(std::string_view line) { return part_of(json::parse(line, keep)); }
 
 bool TimeRange::contains(const std::string& time) const {
     if (!from.empty() && time.compare(0, from.size(), from) < 0) return false;

@@ -56,7 +56,7 @@ struct TimeRange {
 
 // One line of a day file as a PartRecord; throws nlohmann::json::exception when it is not a
 // result line. For the daemon's own lines (the lot report it keeps).
-PartRecord parse_result_line(const std::string& line);
+PartRecord parse_result_line(std::string_view line);
 
 struct PartsRead {
     std::vector<PartRecord> parts;  // in file order (days by name), one per sequence number
