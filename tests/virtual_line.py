@@ -955,6 +955,9 @@ def main():
     ap.add_argument("--check-nominal-mm", type=float,
                     help="with --commission: fail unless, with the nominal geometry, a part is not "
                          "found, a feature not measured, or one off by at least this much")
+    ap.add_argument("--check-remeasure", action="store_true",
+                    help="archive every part, then check `hotgauge remeasure` on the archive "
+                         "(remeasure_check.py)")
     a = ap.parse_args()
     if a.out:
         shutil.rmtree(a.out, ignore_errors=True)
@@ -979,7 +982,7 @@ def main():
     for n, b in bad.items():
         print(f"bad part: conveyor part {n}: {', '.join(b)}", flush=True)
     line = Line(a.bin_dir, workdir, a.address, seed=a.seed, calibration=cal,
-                true_calibration=truth, archive_every_nth_ok=1 if cal else 0,
+                true_calibration=truth, archive_every_nth_ok=1 if cal or a.check_remeasure else 0,
                 master_parts=[n for n, slot in runs if slot != 1], forged=a.forged,
                 bad_parts=bad)
     try:
@@ -1054,6 +1057,9 @@ def main():
             report_check.check_part_report(a.bin_dir, line.results_dir, workdir)
             report_check.check_daemon_report(line.results_dir)
         check_notifications(line.notify)
+        if a.check_remeasure:
+            import remeasure_check
+            remeasure_check.check_remeasure(a.bin_dir, line.results_dir, workdir)
         assert all(p["state"] == DONE for p in parts), "a part was not measured"
         assert not (sorting and sorting[3]), \
             f"{len(sorting[3])} PLC verdicts differ from the truth's (WRONG: under 'sorting')"

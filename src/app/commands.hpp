@@ -27,6 +27,7 @@ Command add_study(CLI::App& app);
 Command add_report(CLI::App& app);
 Command add_report_part(CLI::App* report);
 Command add_export(CLI::App& app);
+Command add_remeasure(CLI::App& app);
 
 // The measure job, shared by `measure` and `verify`: read the recording, take the calibration's
 // geometry, read the recipe, the pose or model, run the pipeline.

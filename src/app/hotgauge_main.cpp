@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
     add(hotgauge::app::add_study);
     add(hotgauge::app::add_report);
     add(hotgauge::app::add_export);
+    add(hotgauge::app::add_remeasure);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

@@ -74,6 +74,8 @@ PartRecord part_of(const json& line) {
             p.certified.emplace_back(f.at("name").get<std::string>(),
                                      f.at("certified_mm").get<double>());
     }
+    if (auto a = line.find("archived_as"); a != line.end() && a->is_string())
+        p.archived_as = a->get<std::string>();
     const json& part = line.at("part");
     p.part_id = part.value("part_id", "");
     p.recipe = part.value("recipe", "");
@@ -206,16 +208,25 @@ core::Result<std::filesystem::path> archived_recording(const std::filesystem::pa
     if (!archived_as)
         return core::make_error(dir.string() + ": no " + part + " in the results (" +
                                 std::to_string(files->size()) + " day files)");
-    if (!archived_as->is_string())
+    PartRecord record;
+    record.sequence = sequence;
+    if (archived_as->is_string()) record.archived_as = archived_as->get<std::string>();
+    return archived_folder(dir, record, where);
+}
+
+core::Result<std::filesystem::path> archived_folder(const std::filesystem::path& dir,
+                                                    const PartRecord& record,
+                                                    const std::string& where) {
+    const std::string part = "part sequence " + std::to_string(record.sequence);
+    if (!record.archived_as)
         return core::make_error(where + ": " + part +
                                 " was not archived (the archive keeps NOK, degraded and "
                                 "unmeasured parts and every Nth OK part)");
-    std::filesystem::path folder = archived_as->get<std::string>();
+    std::filesystem::path folder = *record.archived_as;
     std::error_code ec;
     if (folder.is_relative() && !std::filesystem::exists(folder, ec)) folder = dir / folder;
     if (!std::filesystem::is_directory(folder, ec))
-        return core::make_error(where + ": " + part + " was archived as " +
-                                archived_as->get<std::string>() +
+        return core::make_error(where + ": " + part + " was archived as " + *record.archived_as +
                                 ", which is gone (deleted to keep the archive's quota?)");
     if (std::ifstream note(folder / RawArchive::kNotArchived); note) {
         std::string why;

@@ -39,8 +39,9 @@ struct PartRecord {
     std::string part_id, recipe, verdict;
     std::optional<double> temperature_c;
     bool master_check = false;
-    int die = 0;                          // the die the PLC named, 0 when none
-    std::vector<FeatureRecord> features;  // in recipe order
+    int die = 0;                             // the die the PLC named, 0 when none
+    std::vector<FeatureRecord> features;     // in recipe order
+    std::optional<std::string> archived_as;  // the raw archive folder, as written; empty: none
     // A master check's master serial and certified values (feature name -> mm).
     std::string master;
     std::vector<std::pair<std::string, double>> certified;
@@ -100,5 +101,10 @@ core::Result<FeatureSeries> read_feature_values(const std::filesystem::path& dir
 // sequence, and the file and line when the part was not archived or its recording is gone.
 core::Result<std::filesystem::path> archived_recording(const std::filesystem::path& dir,
                                                        std::uint64_t sequence);
+// The recording folder of a part read from `dir` (its `archived_as`), with the same checks and
+// errors as archived_recording; `where` names the part's line ("file:line") in them.
+core::Result<std::filesystem::path> archived_folder(const std::filesystem::path& dir,
+                                                    const PartRecord& part,
+                                                    const std::string& where);
 
 }  // namespace hotgauge::results

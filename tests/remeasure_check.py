@@ -1,0 +1,187 @@
+"""`hotgauge remeasure` on the virtual line's archive (docs/results.md "Re-measuring the archive"),
+called by virtual_line.py --check-remeasure after the line has stopped:
+
+1. With the recipe the daemon used, every part's result equals the daemon's: the `part` of each
+   new results line is the daemon's, wall times (stage_ms) aside, and the comparison finds every
+   part unchanged. Not on a terminal: plain progress lines, no carriage returns.
+2. With one tolerance tightened so that the new limit falls between the parts' values, the flips
+   reported are exactly the parts whose value lies between the old and the new limit, and nothing
+   else. This run is on a pseudo-terminal: what a terminal shows has the progress bar redrawn in
+   place, counting up to every part, with parts/s and the time left.
+3. Ctrl-C (SIGINT) after the first part: exit 130, the parts written are the ones the comparison
+   and the page cover, each equal to the daemon's, and the page says it was stopped.
+"""
+import glob
+import json
+import os
+import pty
+import re
+import select
+import signal
+import subprocess
+import time
+
+import yaml
+
+REPO = os.path.abspath(os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+RECIPE = os.path.join(REPO, "config", "parts", "hub-a.yaml")
+
+
+def result_lines(results_dir):
+    lines = {}
+    for path in sorted(glob.glob(os.path.join(results_dir, "*.jsonl"))):
+        with open(path) as f:
+            for text in f:
+                if text.strip():
+                    j = json.loads(text)
+                    lines[j["sequence"]] = j
+    return lines
+
+
+def without_wall_times(value):
+    """`value` without its wall times (every "stage_ms", the part's and the matcher's)."""
+    if isinstance(value, dict):
+        return {k: without_wall_times(v) for k, v in value.items() if k != "stage_ms"}
+    if isinstance(value, list):
+        return [without_wall_times(v) for v in value]
+    return value
+
+
+def check_same_as_daemon(daemon, out_dir, sequences=None):
+    new = result_lines(os.path.join(out_dir, "results"))
+    assert new, f"{out_dir}: no results written"
+    want = set(sequences) if sequences is not None else {s for s, j in daemon.items()
+                                                         if "verification" not in j}
+    assert set(new) == want, f"sequences {sorted(new)}, expected {sorted(want)}"
+    for seq, line in new.items():
+        a, b = without_wall_times(daemon[seq]["part"]), without_wall_times(line["part"])
+        if a != b:
+            differ = [k for k in set(a) | set(b) if a.get(k) != b.get(k)]
+            raise AssertionError(f"sequence {seq}: remeasured part differs from the daemon's "
+                                 f"in {sorted(differ)}")
+        assert line["time_ns"] == daemon[seq]["time_ns"], f"sequence {seq}: time"
+    return new
+
+
+def remeasure(bin_dir, results_dir, out_dir, recipe):
+    return subprocess.run([os.path.join(bin_dir, "src", "app", "hotgauge"), "remeasure",
+                           results_dir, "--out", out_dir, "--recipe", recipe],
+                          capture_output=True, text=True, timeout=600)
+
+
+def run_on_terminal(argv, interrupt_after=None, timeout=600):
+    """argv on a pseudo-terminal (stdout and stderr): what it printed, its exit status. With
+    `interrupt_after` (a regex), SIGINT as soon as the output matches it."""
+    pid, fd = pty.fork()
+    if pid == 0:
+        os.execv(argv[0], argv)
+    out, sent, t0 = b"", False, time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        r, _, _ = select.select([fd], [], [], 1.0)
+        if r:
+            try:
+                chunk = os.read(fd, 4096)
+            except OSError:  # EIO: the child closed the terminal
+                break
+            if not chunk:
+                break
+            out += chunk
+        if interrupt_after and not sent and re.search(interrupt_after, out.decode(errors="replace")):
+            os.kill(pid, signal.SIGINT)
+            sent = True
+    _, status = os.waitpid(pid, 0)
+    return out.decode(errors="replace"), os.waitstatus_to_exitcode(status)
+
+
+def tightened_limit(values):
+    """A feature and a limit between its parts' values: (name, side, limit, parts beyond it).
+    Recipes keep lower <= 0 <= upper, so the upper limit comes down to a midpoint >= 0 or the
+    lower one up to a midpoint <= 0."""
+    for name, devs in sorted(values.items(), key=lambda kv: -len(kv[1])):
+        devs = sorted(devs)
+        mids = [(devs[j][0] + devs[j + 1][0]) / 2 for j in range(len(devs) - 1)]
+        for m in mids:
+            if m >= 0:
+                return name, 1, m, sorted(seq for dev, seq in devs if dev > m)
+        for m in reversed(mids):
+            if m <= 0:
+                return name, 0, m, sorted(seq for dev, seq in devs if dev < m)
+    raise AssertionError(f"no feature has two OK values to put a limit between: {values}")
+
+
+def tightened_recipe(daemon, workdir):
+    """hub-a with one feature's limit between the parts' values: the recipe, the feature, the
+    limit, the parts (sequences) whose value lies between the old and the new limit."""
+    values = {}
+    for seq, j in daemon.items():
+        if "verification" in j:
+            continue
+        for f in j["part"]["features"]:
+            if f["verdict"] == "OK" and f["cold_mm"] is not None:
+                values.setdefault(f["name"], []).append((f["cold_mm"] - f["nominal_mm"], seq))
+    name, side, limit, expected = tightened_limit(values)
+    with open(RECIPE) as f:
+        recipe = yaml.safe_load(f)
+    for feat in recipe["features"]:
+        if feat["name"] == name:
+            feat["tolerance_mm"][side] = limit
+    path = os.path.join(workdir, "hub-a-tightened.yaml")
+    with open(path, "w") as f:
+        yaml.safe_dump(recipe, f, sort_keys=False)
+    return path, name, limit, expected
+
+
+def check_progress_on_terminal(screen, n):
+    states = re.findall(r"\[[#.]+\] (\d+)/(\d+) parts +([\d.]+) parts/s +([\d:]+ (?:left|in all)|"
+                        r"time left not known yet)", screen)
+    assert states, f"no progress bar on the terminal:\n{screen}"
+    counts = [int(d) for d, total, _, _ in states]
+    assert all(int(total) == n for _, total, _, _ in states), states
+    assert counts == sorted(counts) and counts[-1] == n, f"progress counts {counts}"
+    assert "\r" in screen and "\x1b[K" in screen, "the bar is not redrawn in place"
+    assert states[-1][3].endswith("in all"), states[-1]
+    return counts
+
+
+def check_remeasure(bin_dir, results_dir, workdir):
+    daemon = result_lines(results_dir)
+    parts = [s for s, j in daemon.items() if "verification" not in j]
+    hotgauge = os.path.join(bin_dir, "src", "app", "hotgauge")
+
+    same = os.path.join(workdir, "remeasure-same")
+    r = remeasure(bin_dir, results_dir, same, RECIPE)
+    assert r.returncode == 0, f"remeasure exit {r.returncode}: {r.stderr}"
+    assert "\r" not in r.stderr and re.search(r"\d+/\d+ parts", r.stderr), r.stderr
+    check_same_as_daemon(daemon, same)
+    c = json.load(open(os.path.join(same, "comparison.json")))
+    assert c["parts"] == len(parts) and c["unchanged"] == len(parts), c
+    assert not c["flips"] and not c["part_flips"], c["flips"]
+    print(f"remeasure with the daemon's recipe: {len(parts)} parts, every one equal to the "
+          f"daemon's result (wall times aside)")
+
+    recipe, name, limit, expected = tightened_recipe(daemon, workdir)
+    tight = os.path.join(workdir, "remeasure-tightened")
+    screen, rc = run_on_terminal([hotgauge, "remeasure", results_dir, "--out", tight, "--recipe",
+                                  recipe])
+    assert rc == 0, f"remeasure exit {rc}:\n{screen}"
+    counts = check_progress_on_terminal(screen, len(parts))
+    c = json.load(open(os.path.join(tight, "comparison.json")))
+    flips = sorted((f["sequence"], f["feature"], f["before"], f["after"]) for f in c["flips"])
+    assert flips == [(s, name, "OK", "NOK") for s in expected], \
+        f"flips {flips}, expected {name} OK -> NOK on {expected}"
+    assert os.path.getsize(os.path.join(tight, "remeasure.html")) > 0
+    print(f"remeasure with a limit of {name} tightened to {limit:+.4f} mm: flips "
+          f"{[s for s, *_ in flips]} exactly the parts between the limits; progress on a "
+          f"terminal counted {counts}")
+
+    stopped = os.path.join(workdir, "remeasure-stopped")
+    screen, rc = run_on_terminal([hotgauge, "remeasure", results_dir, "--out", stopped, "--recipe",
+                                  RECIPE, "--jobs", "1"], interrupt_after=r"\] 1/\d+ parts")
+    assert rc == 130, f"remeasure after Ctrl-C: exit {rc}, expected 130:\n{screen}"
+    written = result_lines(os.path.join(stopped, "results"))
+    check_same_as_daemon(daemon, stopped, sequences=sorted(written))
+    c = json.load(open(os.path.join(stopped, "comparison.json")))
+    assert 1 <= len(written) < len(parts) and c["parts"] == len(written), (len(written), c)
+    assert "stopped" in open(os.path.join(stopped, "remeasure.html")).read().lower()
+    print(f"remeasure stopped by Ctrl-C after part 1: exit 130, {len(written)} of {len(parts)} "
+          f"parts written, each equal to the daemon's, the page says it was stopped")
