@@ -84,15 +84,17 @@ void refit_off_ray_columns(const core::FaceScan& f, std::vector<ColumnSums>& sum
     const std::int64_t n = f.n_profiles(), w = f.width;
     std::vector<std::uint8_t> bad(static_cast<std::size_t>(w), 0);
     bool any = false;
-    for (std::int64_t k = 0; k < n; ++k)
+    for (std::int64_t k = 0; k < n; ++k) {
+        const float* row = f.profiles_mm.data() + k * w * 2;  // (x, z) per column
         for (std::int64_t i = 0; i < w; ++i) {
-            const double x = f.x(k, i), z = f.z(k, i);
+            const double x = row[2 * i], z = row[2 * i + 1];
             if (!std::isfinite(x) || !std::isfinite(z) || std::isnan(b[i])) continue;
             if (std::abs(x - a[i] - b[i] * z) > kRayToleranceMm) {
                 bad[i] = 1;
                 any = true;
             }
         }
+    }
     if (!any) return;
     for (std::int64_t i = 0; i < w; ++i) {
         if (!bad[i]) continue;
@@ -162,11 +164,13 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
             f.T_world_camera.translation() + f.profile_positions_mm[k] * f.scan_direction;
         if (u && static_cast<std::int64_t>(u->size()) == fr.n) t += (*u)[k];
         fr.origin[k] = T_part_world * t;
+        const float* row = f.profiles_mm.data() + k * fr.w * 2;  // (x, z) per column
+        const bool left_out = fr.left_out(k);
         for (std::int64_t i = 0; i < fr.w; ++i) {
-            const float x = f.x(k, i), z = f.z(k, i);
+            const float x = row[2 * i], z = row[2 * i + 1];
             if (!std::isfinite(x) || !std::isfinite(z)) continue;
             columns[i].add(x, z);  // a column's ray does not depend on the compensation
-            if (fr.left_out(k)) continue;
+            if (left_out) continue;
             const Eigen::Vector3d p = fr.M * Eigen::Vector3d(x, 0.0, z) + fr.origin[k];
             const double r2 = p.x() * p.x() + p.y() * p.y();
             if (!(r2 <= r2_max && p.z() >= z_lo && p.z() <= z_hi)) continue;  // NaN-safe

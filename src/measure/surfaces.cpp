@@ -43,32 +43,30 @@ struct KeyedPoints {
     std::vector<std::int64_t> keys;
 };
 
-// The samples of all faces within band of z_e and between r_lo and r_hi about the axis.
+// The samples of all faces within band of z_e and between r_lo and r_hi about the axis, `found`
+// of them. A plane is known to a fraction of a micrometre from tens of thousands of points: of
+// more than `max_points`, an even subsample (every k-th in face and bucket order) keeps the fit's
+// cost bounded; they are counted first, so that only the kept ones are copied.
 KeyedPoints level_candidates(const std::vector<const FaceFrame*>& frames, double z_e, double band,
-                             double r_lo, double r_hi) {
+                             double r_lo, double r_hi, std::size_t max_points, std::size_t& found) {
+    auto on_level = [&](const FaceFrame::Near& s) {
+        return std::abs(s.p.z() - z_e) <= band && s.r >= r_lo && s.r <= r_hi;
+    };
+    found = 0;
+    for (const FaceFrame* f : frames)
+        f->for_z(z_e - band, z_e + band, [&](const FaceFrame::Near& s) { found += on_level(s); });
+    const std::size_t keep_every = found <= max_points ? 1 : (found + max_points - 1) / max_points;
     KeyedPoints out;
+    out.points.reserve(found / keep_every + 1);
+    out.keys.reserve(found / keep_every + 1);
+    std::size_t seen = 0;
     for (std::size_t fi = 0; fi < frames.size(); ++fi)
         frames[fi]->for_z(z_e - band, z_e + band, [&](const FaceFrame::Near& s) {
-            if (std::abs(s.p.z() - z_e) <= band && s.r >= r_lo && s.r <= r_hi) {
-                out.points.push_back(s.p.cast<double>());
-                out.keys.push_back(static_cast<std::int64_t>(fi) << 32 | s.q / frames[fi]->w);
-            }
+            if (!on_level(s) || seen++ % keep_every != 0) return;
+            out.points.push_back(s.p.cast<double>());
+            out.keys.push_back(static_cast<std::int64_t>(fi) << 32 | s.q / frames[fi]->w);
         });
     return out;
-}
-
-// A plane is known to a fraction of a micrometre from tens of thousands of points: beyond that,
-// an even subsample keeps the fit's cost bounded.
-void keep_at_most(KeyedPoints& cand, std::size_t max_points) {
-    if (cand.points.size() <= max_points) return;
-    const std::size_t keep_every = (cand.points.size() + max_points - 1) / max_points;
-    std::size_t m = 0;
-    for (std::size_t q = 0; q < cand.points.size(); q += keep_every, ++m) {
-        cand.points[m] = cand.points[q];
-        cand.keys[m] = cand.keys[q];
-    }
-    cand.points.resize(m);
-    cand.keys.resize(m);
 }
 
 // RANSAC scores hypotheses on an even subsample (a few thousand points decide a plane as well as
@@ -95,15 +93,14 @@ core::Result<KeyedPoints> ransac_consensus(const KeyedPoints& cand, double thr) 
 PlaneResult fit_level_plane(const std::vector<const FaceFrame*>& frames, double z_e, double band,
                             double r_lo, double r_hi, const MeasureConfig& c,
                             const std::string& what) {
-    constexpr std::size_t kMaxPlanePoints = 20000;  // keep_at_most: why
+    constexpr std::size_t kMaxPlanePoints = 20000;  // level_candidates: why
     PlaneResult out;
-    KeyedPoints cand = level_candidates(frames, z_e, band, r_lo, r_hi);
-    if (static_cast<int>(cand.points.size()) < c.min_plane_points) {
-        out.error = what + ": only " + std::to_string(cand.points.size()) +
-                    " points where the plane should be";
+    std::size_t found = 0;
+    KeyedPoints cand = level_candidates(frames, z_e, band, r_lo, r_hi, kMaxPlanePoints, found);
+    if (found < static_cast<std::size_t>(std::max(c.min_plane_points, 0))) {
+        out.error = what + ": only " + std::to_string(found) + " points where the plane should be";
         return out;
     }
-    keep_at_most(cand, kMaxPlanePoints);
     const auto in = ransac_consensus(cand, std::max(c.on_surface_min_mm, kMinRansacThresholdMm));
     if (!in) {
         out.error = what + ": " + in.error().message;
