@@ -364,8 +364,12 @@ Result<FaceScan> read_face(const FileSource& files, const fs::path& root, const 
     if (auto ok = read_into(*acc, f.accel_mps2); !ok) return ok.error();
     if (auto ok = read_into(*at, f.accel_times_ns); !ok) return ok.error();
     // A point is a pair of finite numbers; ±Inf is no more a point than NaN is.
+    // (Written only where it changes: most samples without a return are that NaN already, and a
+    // store to each would dirty four fifths of a side face's memory.)
+    constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+    const auto nan_bits = std::bit_cast<std::uint32_t>(kNaN);
     for (float& v : f.profiles_mm)
-        if (!std::isfinite(v)) v = std::numeric_limits<float>::quiet_NaN();
+        if (!std::isfinite(v) && std::bit_cast<std::uint32_t>(v) != nan_bits) v = kNaN;
     if (auto ok = check_arrays(f, dir); !ok) return ok.error();
     return f;
 }

@@ -75,18 +75,25 @@ void fit_columns(const std::vector<ColumnSums>& sums, std::vector<double>& a,
     }
 }
 
+// The columns of a profile from its first sample with a return to after its last (a side face's
+// profile sees the part in a fifth of its width): the second pass visits only these.
+struct ColumnSpan {
+    std::int64_t first = 0, end = 0;
+};
+
 // A corrupt sample off its column's ray (which a calibrated sensor cannot produce) would tilt
 // that column's line: columns with a sample farther than kRayToleranceMm from their line are
 // fitted again from the samples near a robust (median) line.
-void refit_off_ray_columns(const core::FaceScan& f, std::vector<ColumnSums>& sums,
-                           std::vector<double>& a, std::vector<double>& b) {
+void refit_off_ray_columns(const core::FaceScan& f, const std::vector<ColumnSpan>& spans,
+                           std::vector<ColumnSums>& sums, std::vector<double>& a,
+                           std::vector<double>& b) {
     constexpr double kRayToleranceMm = 0.5;
     const std::int64_t n = f.n_profiles(), w = f.width;
     std::vector<std::uint8_t> bad(static_cast<std::size_t>(w), 0);
     bool any = false;
     for (std::int64_t k = 0; k < n; ++k) {
         const float* row = f.profiles_mm.data() + k * w * 2;  // (x, z) per column
-        for (std::int64_t i = 0; i < w; ++i) {
+        for (std::int64_t i = spans[k].first; i < spans[k].end; ++i) {
             const double x = row[2 * i], z = row[2 * i + 1];
             if (!std::isfinite(x) || !std::isfinite(z) || std::isnan(b[i])) continue;
             if (std::abs(x - a[i] - b[i] * z) > kRayToleranceMm) {
@@ -158,6 +165,7 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
     fr.origin.resize(fr.n);
     std::vector<FaceFrame::Near> near;
     std::vector<ColumnSums> columns(static_cast<std::size_t>(fr.w));
+    std::vector<ColumnSpan> spans(static_cast<std::size_t>(fr.n));
     const double r2_max = r_max * r_max;
     for (std::int64_t k = 0; k < fr.n; ++k) {
         Eigen::Vector3d t =
@@ -169,6 +177,8 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
         for (std::int64_t i = 0; i < fr.w; ++i) {
             const float x = row[2 * i], z = row[2 * i + 1];
             if (!std::isfinite(x) || !std::isfinite(z)) continue;
+            if (spans[k].end == 0) spans[k].first = i;
+            spans[k].end = i + 1;
             columns[i].add(x, z);  // a column's ray does not depend on the compensation
             if (left_out) continue;
             const Eigen::Vector3d p = fr.M * Eigen::Vector3d(x, 0.0, z) + fr.origin[k];
@@ -178,7 +188,7 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
         }
     }
     fit_columns(columns, fr.col_a, fr.col_b);
-    refit_off_ray_columns(f, columns, fr.col_a, fr.col_b);
+    refit_off_ray_columns(f, spans, columns, fr.col_a, fr.col_b);
     bucket_by_z(fr, std::move(near), z_lo, z_hi);
     return fr;
 }
