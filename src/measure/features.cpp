@@ -355,6 +355,7 @@ void PartMeasurer::add_faces(std::size_t first, std::size_t end, const core::Fac
                                          m.bounds.r_max, m.bounds.z_lo, m.bounds.z_hi);
         prepared[j].noise = find(noise, f.name);
     });
+    m.ctx.memo->clear();  // its planes were fitted on the faces as they were
     for (std::size_t j = 0; j < jobs.size(); ++j) {
         const std::string& name = m.rec.faces[jobs[j].first].name;
         (jobs[j].second ? m.frames_all : m.frames).insert_or_assign(name, std::move(prepared[j]));

@@ -322,6 +322,18 @@ std::optional<Annulus> Context::annulus(const std::string& level, double R,
 
 PlaneResult Context::level_plane(const std::string& level, const Annulus& a,
                                  const std::vector<const FaceFrame*>& frames) const {
+    PlaneMemo::Key key{level, a.lo, a.hi, a.facing, frames};
+    {
+        std::lock_guard lock(memo->mutex);
+        if (auto it = memo->planes.find(key); it != memo->planes.end()) return it->second;
+    }
+    PlaneResult pl = fit_annulus_plane(level, a, frames);
+    std::lock_guard lock(memo->mutex);
+    return memo->planes.emplace(std::move(key), std::move(pl)).first->second;
+}
+
+PlaneResult Context::fit_annulus_plane(const std::string& level, const Annulus& a,
+                                       const std::vector<const FaceFrame*>& frames) const {
     const double z = level_z(level);
     // A face narrower than its two largest fillets and a millimetre has no flat part by drawing.
     const bool narrow = (a.hi - a.lo) < 2.0 * recipe.fillet_at(level) + 1.0;

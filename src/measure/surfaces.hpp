@@ -2,8 +2,12 @@
 // Flat faces of the part (docs/measurement.md, "Planes"): which annuli the recipe's solid has at a
 // level, and the robust plane of one from the scans. What every feature kind shares: the recipe,
 // its solid, the expected hot geometry and the settings (`Context`). Internal to the module.
+#include <map>
+#include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "frame.hpp"
@@ -43,11 +47,26 @@ PlaneResult fit_level_plane(const std::vector<const FaceFrame*>& frames, double 
 // "Uncertainty"). From the mean residual of each profile with ≥ 20 points on the plane.
 double profile_scatter(const PlaneResult& pl);
 
+// The level planes fitted so far, so that features sharing a level fit it once (hub-a: 19 fits of
+// 7 planes per part). Keyed by the level, the annulus and the faces' addresses, so it is cleared
+// whenever faces are added or replaced (PartMeasurer::add_faces). Features are measured in
+// parallel: a fit two of them ask for at once is made twice, with the same result.
+struct PlaneMemo {
+    using Key = std::tuple<std::string, double, double, int, std::vector<const FaceFrame*>>;
+    std::mutex mutex;
+    std::map<Key, struct PlaneResult> planes;
+    void clear() {
+        std::lock_guard lock(mutex);
+        planes.clear();
+    }
+};
+
 struct Context {
     const core::Recipe& recipe;
     core::AxisymmetricSolid solid;
     Expect ex;
     MeasureConfig c;
+    std::shared_ptr<PlaneMemo> memo = std::make_shared<PlaneMemo>();
 
     double level_z(const std::string& level) const { return *recipe.level(level); }
     // The annulus faces every face's sensor: its outward normal points against each view.
@@ -60,6 +79,10 @@ struct Context {
     // more than max_plane_tilt_deg from the part axis.
     PlaneResult level_plane(const std::string& level, const Annulus& a,
                             const std::vector<const FaceFrame*>& frames) const;
+
+  private:
+    PlaneResult fit_annulus_plane(const std::string& level, const Annulus& a,
+                                  const std::vector<const FaceFrame*>& frames) const;
 };
 
 }  // namespace hotgauge::measure::detail
