@@ -41,24 +41,33 @@ void coarse_edge(const Context& ctx, const core::FeatureSpec& f,
     seeds.assign(frames.size(), {});
     for (std::size_t fi = 0; fi < frames.size(); ++fi) {
         const FaceFrame& fr = *frames[fi];
+        // The plane samples near the edge first, then each tested for an edge next to it.
+        std::vector<std::pair<std::int64_t, Eigen::Vector3d>> on_plane;
+        std::int64_t k_lo = fr.n, k_hi = -1, i_lo = fr.w, i_hi = -1;
         fr.for_z(plane.point.z() - band, plane.point.z() + band, [&](const FaceFrame::Near& s) {
             if (std::abs(s.r - R_e) > win) return;
             const Eigen::Vector3d p = s.p.cast<double>();
             if (std::abs(plane.distance(p)) > ep.thr) return;
-            seeds[fi].push_back(s.q);
-            const std::int64_t k = s.q / fr.w, i = s.q % fr.w;
+            on_plane.emplace_back(s.q, p);
+            k_lo = std::min(k_lo, s.q / fr.w), k_hi = std::max(k_hi, s.q / fr.w);
+            i_lo = std::min(i_lo, s.q % fr.w), i_hi = std::max(i_hi, s.q % fr.w);
+        });
+        FlatAround flat_around(fr, plane, ep.thr, k_lo, k_hi, i_lo, i_hi);
+        for (const auto& [q, p] : on_plane) {
+            seeds[fi].push_back(q);
+            const std::int64_t k = q / fr.w, i = q % fr.w;
             bool edge = false;
             for (const auto& nb : kNeighbours) {
                 const std::int64_t kn = k + nb[0], in = i + nb[1];
                 if (fr.left_out(kn)) continue;  // unknown, not beyond the edge
                 if (!fr.valid(kn, in) || plane.distance(fr.point(kn, in)) < -ep.thr) edge = true;
             }
-            if (!edge && !flat_around(fr, plane, ep.thr, k, i)) {
+            if (!edge && !flat_around(k, i)) {
                 const auto nrm = grid_normal(fr, k, i);
                 edge = nrm && std::abs(nrm->dot(plane.normal)) < cos_edge;
             }
             if (edge) coarse.push_back(ep.to2d(p));
-        });
+        }
     }
 }
 

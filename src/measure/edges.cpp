@@ -55,15 +55,31 @@ std::optional<Eigen::Vector3d> grid_normal(const FaceFrame& fr, std::int64_t k, 
     return es.eigenvectors().col(0);
 }
 
+FlatAround::FlatAround(const FaceFrame& fr, const PlaneFit& plane, double thr, std::int64_t k_lo,
+                       std::int64_t k_hi, std::int64_t i_lo, std::int64_t i_hi)
+    : fr_(fr),
+      plane_(plane),
+      thr_(thr),
+      k0_(k_lo - kGridHalf),
+      i0_(i_lo - kGridHalf),
+      cols_(std::max<std::int64_t>(i_hi - i_lo + 1 + 2 * kGridHalf, 0)) {
+    const std::int64_t rows = std::max<std::int64_t>(k_hi - k_lo + 1 + 2 * kGridHalf, 0);
+    state_.assign(static_cast<std::size_t>(rows * cols_), 0);
+}
+
+bool FlatAround::off(std::int64_t k, std::int64_t i) {
+    std::uint8_t& s = state_[static_cast<std::size_t>((k - k0_) * cols_ + (i - i0_))];
+    if (s == 0)
+        s = fr_.valid(k, i) && std::abs(plane_.distance(fr_.point(k, i))) > thr_ ? 2 : 1;
+    return s == 2;
+}
+
 // True when every valid sample of the 5×5 grid neighbourhood is on the plane: its normal is the
 // plane's, no need to compute it.
-bool flat_around(const FaceFrame& fr, const PlaneFit& plane, double thr, std::int64_t k,
-                 std::int64_t i) {
+bool FlatAround::operator()(std::int64_t k, std::int64_t i) {
     for (std::int64_t dk = -kGridHalf; dk <= kGridHalf; ++dk)
         for (std::int64_t di = -kGridHalf; di <= kGridHalf; ++di)
-            if (fr.valid(k + dk, i + di) &&
-                std::abs(plane.distance(fr.point(k + dk, i + di))) > thr)
-                return false;
+            if (off(k + dk, i + di)) return false;
     return true;
 }
 
