@@ -69,8 +69,7 @@ FlatAround::FlatAround(const FaceFrame& fr, const PlaneFit& plane, double thr, s
 
 bool FlatAround::off(std::int64_t k, std::int64_t i) {
     std::uint8_t& s = state_[static_cast<std::size_t>((k - k0_) * cols_ + (i - i0_))];
-    if (s == 0)
-        s = fr_.valid(k, i) && std::abs(plane_.distance(fr_.point(k, i))) > thr_ ? 2 : 1;
+    if (s == 0) s = fr_.valid(k, i) && std::abs(plane_.distance(fr_.point(k, i))) > thr_ ? 2 : 1;
     return s == 2;
 }
 

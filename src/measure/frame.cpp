@@ -127,8 +127,34 @@ void refit_off_ray_columns(const core::FaceScan& f, const std::vector<ColumnSpan
     fit_columns(sums, a, b);
 }
 
+// The near samples in scan order, in blocks of 1.5 MB: as one vector, a top face's 50 MB were
+// mapped from the kernel, zeroed and given back for every face (10-20 ms of system time a part in
+// `hotgauge remeasure`); blocks this size come from the allocator's heap and are reused.
+class NearBlocks {
+  public:
+    void push_back(const FaceFrame::Near& s) {
+        if (blocks_.empty() || blocks_.back().size() == kBlock) {
+            blocks_.emplace_back();
+            blocks_.back().reserve(kBlock);
+        }
+        blocks_.back().push_back(s);
+        ++size_;
+    }
+    std::size_t size() const { return size_; }
+    template <class F>
+    void for_each(F&& f) const {
+        for (const auto& b : blocks_)
+            for (const auto& s : b) f(s);
+    }
+
+  private:
+    static constexpr std::size_t kBlock = 1 << 16;
+    std::vector<std::vector<FaceFrame::Near>> blocks_;
+    std::size_t size_ = 0;
+};
+
 // Counting sort of the near-part samples by z bucket.
-void bucket_by_z(FaceFrame& fr, std::vector<FaceFrame::Near> near, double z_lo, double z_hi) {
+void bucket_by_z(FaceFrame& fr, const NearBlocks& near, double z_lo, double z_hi) {
     const auto nb = static_cast<std::int64_t>((z_hi - z_lo) / FaceFrame::kBucketMm) + 1;
     fr.z0 = z_lo;
     auto index = [&](float z) {
@@ -136,11 +162,11 @@ void bucket_by_z(FaceFrame& fr, std::vector<FaceFrame::Near> near, double z_lo, 
             static_cast<std::int64_t>((z - z_lo) / FaceFrame::kBucketMm), 0, nb - 1);
     };
     fr.bucket.assign(static_cast<std::size_t>(nb + 1), 0);
-    for (const auto& s : near) ++fr.bucket[index(s.p.z()) + 1];
+    near.for_each([&](const FaceFrame::Near& s) { ++fr.bucket[index(s.p.z()) + 1]; });
     for (std::int64_t b = 0; b < nb; ++b) fr.bucket[b + 1] += fr.bucket[b];
     fr.near.resize(near.size());
     std::vector<std::int64_t> fill(fr.bucket.begin(), fr.bucket.end() - 1);
-    for (const auto& s : near) fr.near[fill[index(s.p.z())]++] = s;
+    near.for_each([&](const FaceFrame::Near& s) { fr.near[fill[index(s.p.z())]++] = s; });
 }
 
 }  // namespace
@@ -163,7 +189,7 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
     fr.M = T_part_world.linear() * f.T_world_camera.linear();
     fr.view = fr.M.col(2);
     fr.origin.resize(fr.n);
-    std::vector<FaceFrame::Near> near;
+    NearBlocks near;
     std::vector<ColumnSums> columns(static_cast<std::size_t>(fr.w));
     std::vector<ColumnSpan> spans(static_cast<std::size_t>(fr.n));
     const double r2_max = r_max * r_max;
@@ -189,7 +215,7 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
     }
     fit_columns(columns, fr.col_a, fr.col_b);
     refit_off_ray_columns(f, spans, columns, fr.col_a, fr.col_b);
-    bucket_by_z(fr, std::move(near), z_lo, z_hi);
+    bucket_by_z(fr, near, z_lo, z_hi);
     return fr;
 }
 
