@@ -148,7 +148,19 @@ soak: build
 test: build $(BUILD_ASAN)/CMakeCache.txt
 	tests/run_all.sh $(BUILD) $(BUILD_ASAN) $(JOBS)
 
-bench: build
+# BENCH_BASELINE=<commit> (e.g. HEAD~1): that commit checked out and built in build-baseline, and
+# the remeasure bench sets its stages beside ours (docs/benchmarks.md "Re-measuring the archive");
+# delete build-baseline to take another commit.
+BENCH_BASELINE ?=
+BASELINE_BUILD := build-baseline
+$(BASELINE_BUILD)/src/app/hotgauge:
+	rm -rf $(BASELINE_BUILD) && git worktree prune
+	git worktree add --detach -f $(BASELINE_BUILD)/tree $(BENCH_BASELINE)
+	cmake -S $(BASELINE_BUILD)/tree -B $(BASELINE_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG"
+	cmake --build $(BASELINE_BUILD) -j $(JOBS) --target hotgauge
+
+bench: build $(if $(BENCH_BASELINE),$(BASELINE_BUILD)/src/app/hotgauge)
 	cmake --build $(BUILD) -j $(JOBS) --target hotgauge_bench_match
 	$(BUILD)/tests/bench/hotgauge_bench
 	$(BUILD)/tests/bench/hotgauge_bench_match
@@ -158,9 +170,11 @@ bench: build
 	/usr/bin/python3 tests/bench/accel_loss.py $(BUILD) --recordings 4 --loss-seeds 2
 	/usr/bin/python3 tests/bench/lot_report.py $(BUILD)
 	/usr/bin/python3 tests/bench/forged_sorting.py $(BUILD) --parts 60 --first-seed 1000 --bad-every 3
+	/usr/bin/python3 tests/bench/remeasure_bench.py $(BUILD) --parts 200 --distinct 10 --old-parts 20 \
+	  $(if $(BENCH_BASELINE),--baseline-bin-dir $(BASELINE_BUILD))
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')
 
 clean:
-	rm -rf $(BUILD) $(BUILD_ASAN) $(BUILD_FUZZ) $(BUILD_FUZZ_VOLUME)
+	rm -rf $(BUILD) $(BUILD_ASAN) $(BUILD_FUZZ) $(BUILD_FUZZ_VOLUME) $(BASELINE_BUILD)

@@ -6,8 +6,9 @@ called by virtual_line.py --check-remeasure after the line has stopped:
    part unchanged. Not on a terminal: plain progress lines, no carriage returns.
 2. With one tolerance tightened so that the new limit falls between the parts' values, the flips
    reported are exactly the parts whose value lies between the old and the new limit, and nothing
-   else. This run is on a pseudo-terminal: what a terminal shows has the progress bar redrawn in
-   place, counting up to every part, with parts/s and the time left.
+   else, in comparison.json and in the page as headless Chromium renders it. This run is on a
+   pseudo-terminal: what a terminal shows has the progress bar redrawn in place, counting up to
+   every part, with parts/s and the time left.
 3. Ctrl-C (SIGINT) after the first part: exit 130, the parts written are the ones the comparison
    and the page cover, each equal to the daemon's, and the page says it was stopped.
 """
@@ -131,6 +132,19 @@ def tightened_recipe(daemon, workdir):
     return path, name, limit, expected
 
 
+def page_rows(html, table):
+    """The rows of the page's table `table` as headless Chromium rendered them (report_check.py):
+    the page parses, and says what the comparison says."""
+    import html as html_text
+    import report_check
+    dom = report_check.chromium("--dump-dom", "file://" + os.path.abspath(html))
+    body = re.search(rf"<table class=\"{table}\">(.*?)</table>", dom, re.S)
+    assert body, f"{html}: no table '{table}' rendered"
+    rows = re.findall(r"<tr[^>]*>(.*?)</tr>", body.group(1), re.S)[1:]  # the header left out
+    return [[html_text.unescape(re.sub(r"<[^>]+>", "", c)).strip()
+             for c in re.findall(r"<td[^>]*>(.*?)</td>", r, re.S)] for r in rows]
+
+
 def check_progress_on_terminal(screen, n):
     states = re.findall(r"\[[#.]+\] (\d+)/(\d+) parts +([\d.]+) parts/s +([\d:]+ (?:left|in all)|"
                         r"time left not known yet)", screen)
@@ -169,7 +183,8 @@ def check_remeasure(bin_dir, results_dir, workdir):
     flips = sorted((f["sequence"], f["feature"], f["before"], f["after"]) for f in c["flips"])
     assert flips == [(s, name, "OK", "NOK") for s in expected], \
         f"flips {flips}, expected {name} OK -> NOK on {expected}"
-    assert os.path.getsize(os.path.join(tight, "remeasure.html")) > 0
+    rows = page_rows(os.path.join(tight, "remeasure.html"), "flips")
+    assert sorted(int(r[0]) for r in rows) == expected and all(name in r for r in rows), rows
     print(f"remeasure with a limit of {name} tightened to {limit:+.4f} mm: flips "
           f"{[s for s, *_ in flips]} exactly the parts between the limits; progress on a "
           f"terminal counted {counts}")

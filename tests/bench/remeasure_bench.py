@@ -12,14 +12,19 @@ vibration), each archived PARTS/DISTINCT times (a symbolic link), with a results
 the daemon's format whose `part` is that recording's `hotgauge measure --json`. The old way is
 timed on OLD_PARTS of them (it is slow); parts/s is what is compared.
 
+With --baseline-bin-dir (a build of an earlier commit, e.g. `make bench BENCH_BASELINE=HEAD~1`),
+also stage by stage: `hotgauge measure --threads 1` of the distinct parts with both builds,
+alternating, medians per stage.
+
     /usr/bin/python3 tests/bench/remeasure_bench.py build [--parts 200] [--distinct 10]
-        [--old-parts 20] [--forged] [--work DIR]
+        [--old-parts 20] [--forged] [--work DIR] [--baseline-bin-dir DIR]
 """
 import argparse
 import datetime
 import json
 import os
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -87,6 +92,49 @@ def new_way(bin_dir, work, parts):
     return parts / wall, c
 
 
+def stage_medians(results_dir):
+    """Median wall time per pipeline stage over the remeasured parts (each on one thread)."""
+    stages = {}
+    for path in sorted(os.listdir(results_dir)):
+        if path.endswith(".jsonl"):
+            for line in open(os.path.join(results_dir, path)):
+                for k, v in json.loads(line)["part"]["stage_ms"].items():
+                    stages.setdefault(k, []).append(v)
+    return {k: statistics.median(v) for k, v in stages.items()}
+
+
+def measure_stages(bin_dir, recordings, rounds):
+    """`hotgauge measure --threads 1 --json` stage times and the process's wall time, medians."""
+    stages, walls = {}, []
+    for _ in range(rounds):
+        for rec in recordings:
+            t0 = time.monotonic()
+            out = json.loads(hotgauge(bin_dir, "measure", rec, "--json", "--threads", "1"))
+            walls.append((time.monotonic() - t0) * 1e3)
+            for k, v in out["stage_ms"].items():
+                stages.setdefault(k, []).append(v)
+    return {k: statistics.median(v) for k, v in stages.items()}, statistics.median(walls)
+
+
+def compare_with_baseline(bin_dir, baseline, recordings):
+    """Stage by stage, ours against a baseline build, one part at a time on one thread, the two
+    alternating (rounds of every recording) so that both see the same machine."""
+    ours, theirs = ({}, []), ({}, [])
+    for _ in range(3):
+        for acc, b in ((ours, bin_dir), (theirs, baseline)):
+            st, wall = measure_stages(b, recordings, 1)
+            for k, v in st.items():
+                acc[0].setdefault(k, []).append(v)
+            acc[1].append(wall)
+    print(f"stage by stage, `hotgauge measure --threads 1`, medians over {len(recordings)} "
+          f"recordings x 3 alternating rounds: ours / baseline {baseline}")
+    for k in ours[0]:
+        a, b = statistics.median(ours[0][k]), statistics.median(theirs[0].get(k, [float("nan")]))
+        print(f"  {k:<12} {a:7.1f} ms  {b:7.1f} ms  x{b / a:.2f}")
+    a, b = statistics.median(ours[1]), statistics.median(theirs[1])
+    print(f"  {'process':<12} {a:7.1f} ms  {b:7.1f} ms  x{b / a:.2f} (whole `hotgauge measure`)")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("bin_dir")
@@ -95,6 +143,7 @@ def main():
     ap.add_argument("--old-parts", type=int, default=20)
     ap.add_argument("--forged", action="store_true", help="as-forged parts (simulate --forged)")
     ap.add_argument("--work", help="working folder (kept); default: a temporary one")
+    ap.add_argument("--baseline-bin-dir", help="a build of an earlier commit: its stages beside ours")
     a = ap.parse_args()
     work = a.work or tempfile.mkdtemp(prefix="hotgauge-remeasure-bench-")
     if a.work:
@@ -115,6 +164,11 @@ def main():
               f"{c['unchanged']} of {c['parts']} parts unchanged")
         print(f"ratio: {new / old1:.1f}x one at a time, {new / max(old1, old2):.1f}x the faster "
               f"old way")
+        st = stage_medians(os.path.join(work, "remeasured", "results"))
+        print("where a part's time goes in `hotgauge remeasure` (medians, each part on one "
+              "thread, two at once): " + ", ".join(f"{k} {v:.1f} ms" for k, v in st.items()))
+        if a.baseline_bin_dir:
+            compare_with_baseline(a.bin_dir, a.baseline_bin_dir, recordings)
     finally:
         if not a.work:
             shutil.rmtree(work, ignore_errors=True)
