@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -229,12 +230,22 @@ TEST(RecordingIo, InfiniteProfileValuesAreNoPoints) {
     ASSERT_EQ(finite.size(), 3u);
     p[finite[0]] = std::numeric_limits<float>::infinity();
     p[finite[1]] = -std::numeric_limits<float>::infinity();
+    // A NaN with a payload, in the first block of 16 values and in the last, shorter one (the
+    // reader tests whole blocks at once): each reads as the one quiet NaN.
+    const float payload_nan = std::bit_cast<float>(std::uint32_t{0x7fa00001u});
+    p[1] = payload_nan;
+    p[p.size() - 1] = payload_nan;
+    ASSERT_NE(p.size() % 16, 0u) << "the test wants a last block shorter than 16";
     ASSERT_TRUE(write_recording(rec, tmp.path / "part").ok());
     auto back = read_recording(tmp.path / "part");
     ASSERT_TRUE(back.ok()) << back.error().message;
     const auto& q = back->faces[0].profiles_mm;
     EXPECT_TRUE(std::isnan(q[finite[0]]) && std::isnan(q[finite[1]]));
     EXPECT_EQ(q[finite[2]], p[finite[2]]);
+    const auto quiet = std::bit_cast<std::uint32_t>(std::numeric_limits<float>::quiet_NaN());
+    EXPECT_EQ(std::bit_cast<std::uint32_t>(q[1]), quiet);
+    EXPECT_EQ(std::bit_cast<std::uint32_t>(q[q.size() - 1]), quiet);
+    EXPECT_EQ(std::bit_cast<std::uint32_t>(q[finite[0]]), quiet);
 }
 
 TEST(RecordingIo, RoundTripWithoutTemperatureAndOverwrite) {

@@ -20,6 +20,24 @@ double span_s(std::int64_t later, std::int64_t earlier) {
     return (static_cast<double>(later) - static_cast<double>(earlier)) * 1e-9;
 }
 
+// The (x, z) pairs without a NaN, counted in blocks of a fixed size (a loop the compiler
+// vectorizes: the count was 2 % of a part's time in `hotgauge remeasure`).
+std::int64_t count_points(const std::vector<float>& xz) {
+    constexpr std::size_t kBlock = 16;  // values: 8 points
+    const std::size_t n = xz.size() - xz.size() % 2;
+    std::int64_t points = 0;
+    std::size_t q = 0;
+    for (; q + kBlock <= n; q += kBlock) {
+        int in_block = 0;
+        for (std::size_t j = 0; j < kBlock; j += 2)  // NaN is the one value not equal to itself
+            in_block += static_cast<int>(xz[q + j] == xz[q + j]) &
+                        static_cast<int>(xz[q + j + 1] == xz[q + j + 1]);
+        points += in_block;
+    }
+    for (; q < n; q += 2) points += !std::isnan(xz[q]) && !std::isnan(xz[q + 1]);
+    return points;
+}
+
 }  // namespace
 
 FaceSummary summarize(const core::FaceScan& f) {
@@ -27,8 +45,7 @@ FaceSummary summarize(const core::FaceScan& f) {
     s.name = f.name;
     s.profiles = f.n_profiles();
     s.width = f.width;
-    for (std::size_t q = 0; q + 1 < f.profiles_mm.size(); q += 2)
-        s.points += !std::isnan(f.profiles_mm[q]) && !std::isnan(f.profiles_mm[q + 1]);
+    s.points = count_points(f.profiles_mm);
     const double total = static_cast<double>(s.profiles * s.width);
     s.nan_fraction = total > 0 ? 1.0 - static_cast<double>(s.points) / total : 0.0;
     if (s.profiles > 1) s.scan_s = span_s(f.profile_times_ns.back(), f.profile_times_ns.front());
