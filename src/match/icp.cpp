@@ -482,3 +482,27 @@ Support support(const Surface& surface, const std::vector<Eigen::Vector3f>& pts,
 }
 
 }  // namespace hotgauge::match::detail
+
+namespace hotgauge::match {
+
+SurfaceCache& SurfaceCache::operator=(const SurfaceCache&) {
+    std::lock_guard lock(mutex_);
+    surface_.reset();  // it was this model's old data's
+    return *this;
+}
+
+SurfaceCache& SurfaceCache::operator=(SurfaceCache&&) noexcept {
+    std::lock_guard lock(mutex_);
+    surface_.reset();
+    return *this;
+}
+
+SurfaceCache::~SurfaceCache() = default;
+
+std::shared_ptr<const detail::Surface> SurfaceCache::get(const Model& model) const {
+    std::lock_guard lock(mutex_);
+    if (!surface_) surface_ = std::make_shared<const detail::Surface>(model);
+    return surface_;
+}
+
+}  // namespace hotgauge::match

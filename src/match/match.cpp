@@ -247,10 +247,10 @@ std::vector<Cluster> cluster(const Model& model, std::vector<Candidate> cands, d
 
 // What the matcher works on: the scene in the world frame and the model surface ICP fits.
 struct Prepared {
-    detail::Samples scene;                     // oriented voting samples
-    std::vector<Eigen::Vector3f> dense;        // the dense ICP grid
-    std::unique_ptr<detail::Surface> surface;  // the model's
-    std::int64_t background_removed = 0;       // voting samples on the background plane
+    detail::Samples scene;                           // oriented voting samples
+    std::vector<Eigen::Vector3f> dense;              // the dense ICP grid
+    std::shared_ptr<const detail::Surface> surface;  // the model's (kept with it)
+    std::int64_t background_removed = 0;             // voting samples on the background plane
 };
 
 // Drops the background plane (the support plate, a wall) from the voting samples and the grid,
@@ -291,7 +291,7 @@ Prepared prepare(const Model& model, const core::Recording& rec, const core::Fac
         else if (job == 1)
             p.dense = detail::grid_points(rec, u, cfg.icp_grid_mm);
         else
-            p.surface = std::make_unique<detail::Surface>(model);
+            p.surface = model.surface.get(model);
     });
     if (cfg.remove_background_plane)
         p.background_removed =
