@@ -65,6 +65,8 @@ std::vector<Bracket> bracket_edges(const FaceFrame& fr, const std::vector<std::i
         for (const auto& nb : kNeighbours) {
             const std::int64_t kb = k + nb[0], ib = i + nb[1];
             if (kb < 0 || kb >= fr.n || ib < 0 || ib >= fr.w || fr.left_out(kb)) continue;
+            // On the surface too (most neighbours): no edge between, whatever its crossing.
+            if (fr.valid(kb, ib) && on(kb, ib)) continue;
             const double sb = cross(kb, ib);
             if (std::isnan(sb)) continue;
             // Beyond the edge: no return, or a return farther from the sensor than the surface.
