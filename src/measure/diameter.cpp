@@ -52,7 +52,7 @@ void coarse_edge(const Context& ctx, const core::FeatureSpec& f,
             k_lo = std::min(k_lo, s.q / fr.w), k_hi = std::max(k_hi, s.q / fr.w);
             i_lo = std::min(i_lo, s.q % fr.w), i_hi = std::max(i_hi, s.q % fr.w);
         });
-        FlatAround flat_around(fr, plane, ep.thr, k_lo, k_hi, i_lo, i_hi);
+        PlaneSides sides(fr, plane, ep.thr, k_lo, k_hi, i_lo, i_hi);
         for (const auto& [q, p] : on_plane) {
             seeds[fi].push_back(q);
             const std::int64_t k = q / fr.w, i = q % fr.w;
@@ -60,9 +60,9 @@ void coarse_edge(const Context& ctx, const core::FeatureSpec& f,
             for (const auto& nb : kNeighbours) {
                 const std::int64_t kn = k + nb[0], in = i + nb[1];
                 if (fr.left_out(kn)) continue;  // unknown, not beyond the edge
-                if (!fr.valid(kn, in) || plane.distance(fr.point(kn, in)) < -ep.thr) edge = true;
+                if (sides.empty_or_below(kn, in)) edge = true;
             }
-            if (!edge && !flat_around(k, i)) {
+            if (!edge && !sides.flat_around(k, i)) {
                 const auto nrm = grid_normal(fr, k, i);
                 edge = nrm && std::abs(nrm->dot(plane.normal)) < cos_edge;
             }

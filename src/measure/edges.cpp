@@ -55,7 +55,7 @@ std::optional<Eigen::Vector3d> grid_normal(const FaceFrame& fr, std::int64_t k, 
     return es.eigenvectors().col(0);
 }
 
-FlatAround::FlatAround(const FaceFrame& fr, const PlaneFit& plane, double thr, std::int64_t k_lo,
+PlaneSides::PlaneSides(const FaceFrame& fr, const PlaneFit& plane, double thr, std::int64_t k_lo,
                        std::int64_t k_hi, std::int64_t i_lo, std::int64_t i_hi)
     : fr_(fr),
       plane_(plane),
@@ -64,21 +64,30 @@ FlatAround::FlatAround(const FaceFrame& fr, const PlaneFit& plane, double thr, s
       i0_(i_lo - kGridHalf),
       cols_(std::max<std::int64_t>(i_hi - i_lo + 1 + 2 * kGridHalf, 0)) {
     const std::int64_t rows = std::max<std::int64_t>(k_hi - k_lo + 1 + 2 * kGridHalf, 0);
-    state_.assign(static_cast<std::size_t>(rows * cols_), 0);
+    side_.assign(static_cast<std::size_t>(rows * cols_), Side::kUnknown);
 }
 
-bool FlatAround::off(std::int64_t k, std::int64_t i) {
-    std::uint8_t& s = state_[static_cast<std::size_t>((k - k0_) * cols_ + (i - i0_))];
-    if (s == 0) s = fr_.valid(k, i) && std::abs(plane_.distance(fr_.point(k, i))) > thr_ ? 2 : 1;
-    return s == 2;
+PlaneSides::Side PlaneSides::side(std::int64_t k, std::int64_t i) {
+    Side& s = side_[static_cast<std::size_t>((k - k0_) * cols_ + (i - i0_))];
+    if (s == Side::kUnknown) {
+        if (!fr_.valid(k, i)) {
+            s = Side::kNone;
+        } else {
+            const double d = plane_.distance(fr_.point(k, i));
+            s = d < -thr_ ? Side::kBelow : d > thr_ ? Side::kAbove : Side::kOn;
+        }
+    }
+    return s;
 }
 
 // True when every valid sample of the 5×5 grid neighbourhood is on the plane: its normal is the
 // plane's, no need to compute it.
-bool FlatAround::operator()(std::int64_t k, std::int64_t i) {
+bool PlaneSides::flat_around(std::int64_t k, std::int64_t i) {
     for (std::int64_t dk = -kGridHalf; dk <= kGridHalf; ++dk)
-        for (std::int64_t di = -kGridHalf; di <= kGridHalf; ++di)
-            if (off(k + dk, i + di)) return false;
+        for (std::int64_t di = -kGridHalf; di <= kGridHalf; ++di) {
+            const Side s = side(k + dk, i + di);
+            if (s == Side::kAbove || s == Side::kBelow) return false;
+        }
     return true;
 }
 

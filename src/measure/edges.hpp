@@ -19,23 +19,29 @@ double cross_cylinder(double radius, const Eigen::Vector3d& o, const Eigen::Vect
 
 // Local normal from the scan grid neighbourhood (±2 profiles × ±2 columns).
 std::optional<Eigen::Vector3d> grid_normal(const FaceFrame& fr, std::int64_t k, std::int64_t i);
-// Whether the 5×5 grid neighbourhoods of many samples of one face are flat on a plane: every
-// valid sample within thr of it. Each sample's distance is computed once, not once for each of the
-// 25 neighbourhoods it falls in. The samples asked about lie in profiles [k_lo, k_hi] and columns
-// [i_lo, i_hi].
-class FlatAround {
+// Many samples of one face against a plane, each sample's distance computed once and kept (a
+// sample falls in 25 of its neighbours' 5×5 neighbourhoods). The samples asked about lie in
+// profiles [k_lo, k_hi] and columns [i_lo, i_hi]; their neighbourhoods may reach 2 beyond.
+class PlaneSides {
   public:
-    FlatAround(const FaceFrame& fr, const PlaneFit& plane, double thr, std::int64_t k_lo,
+    PlaneSides(const FaceFrame& fr, const PlaneFit& plane, double thr, std::int64_t k_lo,
                std::int64_t k_hi, std::int64_t i_lo, std::int64_t i_hi);
-    bool operator()(std::int64_t k, std::int64_t i);
+    // Every valid sample of the 5×5 grid neighbourhood within thr of the plane.
+    bool flat_around(std::int64_t k, std::int64_t i);
+    // No valid sample there, or one more than thr below the plane (into the material).
+    bool empty_or_below(std::int64_t k, std::int64_t i) {
+        const Side s = side(k, i);
+        return s == Side::kNone || s == Side::kBelow;
+    }
 
   private:
-    bool off(std::int64_t k, std::int64_t i);  // valid and farther than thr from the plane
+    enum class Side : std::uint8_t { kUnknown, kNone, kOn, kAbove, kBelow };
+    Side side(std::int64_t k, std::int64_t i);
     const FaceFrame& fr_;
     const PlaneFit& plane_;
     double thr_;
     std::int64_t k0_, i0_, cols_;
-    std::vector<std::uint8_t> state_;  // per sample: 0 not known yet, 1 not off, 2 off
+    std::vector<Side> side_;
 };
 
 double sample_std(const std::vector<double>& v);
