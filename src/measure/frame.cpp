@@ -200,18 +200,24 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
         fr.origin[k] = T_part_world * t;
         const float* row = f.profiles_mm.data() + k * fr.w * 2;  // (x, z) per column
         const bool left_out = fr.left_out(k);
+        // Local copies: the stores below could alias fr's members, which were then loaded again
+        // for every sample.
+        const Eigen::Matrix3d M = fr.M;
+        const Eigen::Vector3d origin = fr.origin[k];
+        ColumnSpan span;
         for (std::int64_t i = 0; i < fr.w; ++i) {
             const float x = row[2 * i], z = row[2 * i + 1];
             if (!std::isfinite(x) || !std::isfinite(z)) continue;
-            if (spans[k].end == 0) spans[k].first = i;
-            spans[k].end = i + 1;
+            if (span.end == 0) span.first = i;
+            span.end = i + 1;
             columns[i].add(x, z);  // a column's ray does not depend on the compensation
             if (left_out) continue;
-            const Eigen::Vector3d p = fr.M * Eigen::Vector3d(x, 0.0, z) + fr.origin[k];
+            const Eigen::Vector3d p = M * Eigen::Vector3d(x, 0.0, z) + origin;
             const double r2 = p.x() * p.x() + p.y() * p.y();
             if (!(r2 <= r2_max && p.z() >= z_lo && p.z() <= z_hi)) continue;  // NaN-safe
             near.push_back({k * fr.w + i, p.cast<float>(), static_cast<float>(std::sqrt(r2))});
         }
+        spans[k] = span;
     }
     fit_columns(columns, fr.col_a, fr.col_b);
     refit_off_ray_columns(f, spans, columns, fr.col_a, fr.col_b);
