@@ -125,10 +125,23 @@ std::vector<CornerPoint> corner_points(const std::vector<const FaceFrame*>& fram
     const double za = z0 - up * depth * nz, zb = z0 + up * kAbove;
     const double z_from = std::min(za, zb) - kGatherMarginMm,
                  z_to = std::max(za, zb) + kGatherMarginMm;
+    // A cheap bound first, on the sample's distance r from the part axis: the slab holds the
+    // whole level, the window a ring of it. In the plane, a sample's distance from the axis's
+    // crossing a2 differs from r by at most (|h| + r·sin θ) / cos θ (θ the plane's tilt, h the
+    // sample's height over it), and its distance from c by |c − a2| more.
+    const double sin_t = std::sqrt(std::max(0.0, 1.0 - nz * nz));
+    const double h_max = std::max(depth, kAbove), c_off = (c - ep.axis2d()).norm();
+    const double lo = side > 0 ? R - s_in : R - s_out, hi = side > 0 ? R + s_out : R + s_in;
+    constexpr double kRoundingMm = 1e-3;  // r is a float
+    auto maybe_in = [&](double r) {
+        const double e = c_off + (h_max + r * sin_t) / nz + kRoundingMm;
+        return r + e >= lo && r - e <= hi;
+    };
     std::vector<CornerPoint> out;
     for (std::size_t face = 0; face < frames.size(); ++face) {
         const FaceFrame* fr = frames[face];
         fr->for_z(z_from, z_to, [&](const FaceFrame::Near& n) {
+            if (!maybe_in(n.r)) return;
             const Eigen::Vector3d p = n.p.cast<double>();
             const double h = ep.plane.distance(p);
             if (h < -depth || h > kAbove) return;
