@@ -315,11 +315,10 @@ bool to_change(float v) {
     return any != 0;
 }
 
-void to_quiet_nan(std::vector<float>& values) {
-    const std::size_t n = values.size();
+void to_quiet_nan(float* values, std::size_t n) {
     std::size_t at = 0;
     for (; at + kNaNBlock <= n; at += kNaNBlock) {
-        if (!block_to_change(values.data() + at)) continue;
+        if (!block_to_change(values + at)) continue;
         for (std::size_t j = at; j < at + kNaNBlock; ++j)
             if (to_change(values[j])) values[j] = kQuietNaN;
     }
@@ -327,11 +326,30 @@ void to_quiet_nan(std::vector<float>& values) {
         if (to_change(values[at])) values[at] = kQuietNaN;
 }
 
-// The data of `a` straight into `out`: no second copy in memory.
+// The data of `a` into `out` through a buffer of kChunkBytes: `out` is not zero-filled first (as
+// resize() would, a pass over all of it) and `fix(data, n)` works on each chunk while it is in
+// the cache. The chunk is reused; `out` grows into its reserved size without a reallocation.
+constexpr std::size_t kChunkBytes = 256 << 10;
+template <class T, class Fix>
+Result<void> read_into(const Array& a, std::vector<T>& out, Fix&& fix) {
+    const std::size_t n = a.header.data_bytes / sizeof(T), per_chunk = kChunkBytes / sizeof(T);
+    std::vector<T> chunk(std::min(n, per_chunk));
+    out.clear();
+    out.reserve(n);
+    for (std::size_t at = 0; at < n; at += per_chunk) {
+        const std::size_t m = std::min(per_chunk, n - at);
+        if (auto ok =
+                a.file.read(a.header.data_offset + at * sizeof(T), m * sizeof(T), chunk.data());
+            !ok)
+            return ok;
+        fix(chunk.data(), m);
+        out.insert(out.end(), chunk.begin(), chunk.begin() + static_cast<std::ptrdiff_t>(m));
+    }
+    return {};
+}
 template <class T>
 Result<void> read_into(const Array& a, std::vector<T>& out) {
-    out.resize(a.header.data_bytes / sizeof(T));
-    return a.file.read(a.header.data_offset, a.header.data_bytes, out.data());
+    return read_into(a, out, [](T*, std::size_t) {});
 }
 
 Result<FaceScan> read_face(const FileSource& files, const fs::path& root, const std::string& name) {
@@ -395,13 +413,12 @@ Result<FaceScan> read_face(const FileSource& files, const fs::path& root, const 
                           " (one per sample in accel.npy)");
     f.width = prof->header.shape[1];
     // One after the other: the first file that cannot be read ends it.
-    if (auto ok = read_into(*prof, f.profiles_mm); !ok) return ok.error();
+    // A point is a pair of finite numbers; ±Inf is no more a point than NaN is.
+    if (auto ok = read_into(*prof, f.profiles_mm, to_quiet_nan); !ok) return ok.error();
     if (auto ok = read_into(*pt, f.profile_times_ns); !ok) return ok.error();
     if (auto ok = read_into(*pp, f.profile_positions_mm); !ok) return ok.error();
     if (auto ok = read_into(*acc, f.accel_mps2); !ok) return ok.error();
     if (auto ok = read_into(*at, f.accel_times_ns); !ok) return ok.error();
-    // A point is a pair of finite numbers; ±Inf is no more a point than NaN is.
-    to_quiet_nan(f.profiles_mm);
     if (auto ok = check_arrays(f, dir); !ok) return ok.error();
     return f;
 }
