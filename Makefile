@@ -32,7 +32,7 @@ ORACLE_PACKAGES := python3-statsmodels
 
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: deps deps-fuzz oracle-refs install-missing build build-asan build-fuzz build-fuzz-volume demo test fuzz fuzz-brief fuzz-ledger bench format clean soak
+.PHONY: deps deps-fuzz oracle-refs install-missing build build-asan build-fuzz build-fuzz-volume demo test fuzz fuzz-brief fuzz-ledger bench baseline format clean soak
 
 deps:
 	@$(MAKE) -s install-missing PACKAGES="$(DEB_PACKAGES)"
@@ -148,19 +148,23 @@ soak: build
 test: build $(BUILD_ASAN)/CMakeCache.txt
 	tests/run_all.sh $(BUILD) $(BUILD_ASAN) $(JOBS)
 
-# BENCH_BASELINE=<commit> (e.g. HEAD~1): that commit checked out and built in build-baseline, and
-# the remeasure bench sets its stages beside ours (docs/benchmarks.md "Re-measuring the archive");
-# delete build-baseline to take another commit.
-BENCH_BASELINE ?=
+# The remeasure bench sets the stages of BENCH_BASELINE (a commit, default the previous one) beside
+# ours: that commit checked out and built in build-baseline, again whenever it names another
+# commit (docs/benchmarks.md "Re-measuring the archive"). BENCH_BASELINE= leaves it out.
+BENCH_BASELINE ?= HEAD~1
 BASELINE_BUILD := build-baseline
-$(BASELINE_BUILD)/src/app/hotgauge:
-	rm -rf $(BASELINE_BUILD) && git worktree prune
-	git worktree add --detach -f $(BASELINE_BUILD)/tree $(BENCH_BASELINE)
-	cmake -S $(BASELINE_BUILD)/tree -B $(BASELINE_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-	  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG"
+baseline:
+	@commit=$$(git rev-parse --verify "$(BENCH_BASELINE)^{commit}") || exit 1; \
+	if [ "$$(cat $(BASELINE_BUILD)/COMMIT 2>/dev/null)" != "$$commit" ]; then \
+	  rm -rf $(BASELINE_BUILD) && git worktree prune && \
+	  git worktree add --detach -f $(BASELINE_BUILD)/tree $$commit && \
+	  cmake -S $(BASELINE_BUILD)/tree -B $(BASELINE_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	    "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG" && \
+	  echo $$commit > $(BASELINE_BUILD)/COMMIT; \
+	fi; \
 	cmake --build $(BASELINE_BUILD) -j $(JOBS) --target hotgauge
 
-bench: build $(if $(BENCH_BASELINE),$(BASELINE_BUILD)/src/app/hotgauge)
+bench: build $(if $(BENCH_BASELINE),baseline)
 	cmake --build $(BUILD) -j $(JOBS) --target hotgauge_bench_match
 	$(BUILD)/tests/bench/hotgauge_bench
 	$(BUILD)/tests/bench/hotgauge_bench_match

@@ -9,8 +9,11 @@ called by virtual_line.py --check-remeasure after the line has stopped:
    else, in comparison.json and in the page as headless Chromium renders it. This run is on a
    pseudo-terminal: what a terminal shows has the progress bar redrawn in place, counting up to
    every part, with parts/s and the time left.
-3. Ctrl-C (SIGINT) after the first part: exit 130, the parts written are the ones the comparison
-   and the page cover, each equal to the daemon's, and the page says it was stopped.
+3. Ctrl-C (SIGINT) after the first part: exit 130, the parts written are the first ones, the ones
+   the comparison and the page cover, each equal to the daemon's, and the page says it was
+   stopped.
+4. Bad input: a part whose recording is gone is listed with why and the others are measured; a
+   recipe of another part is refused naming both; --out on the results read is refused.
 """
 import glob
 import json
@@ -185,6 +188,9 @@ def check_remeasure(bin_dir, results_dir, workdir):
         f"flips {flips}, expected {name} OK -> NOK on {expected}"
     rows = page_rows(os.path.join(tight, "remeasure.html"), "flips")
     assert sorted(int(r[0]) for r in rows) == expected and all(name in r for r in rows), rows
+    # A limit moves verdicts, never values: every shift 0, every other part unchanged.
+    assert all(f["n"] == 0 or f["worst_mm"] == 0 for f in c["shifts"]), c["shifts"]
+    assert c["unchanged"] == len(parts) - len(expected), c["unchanged"]
     print(f"remeasure with a limit of {name} tightened to {limit:+.4f} mm: flips "
           f"{[s for s, *_ in flips]} exactly the parts between the limits; progress on a "
           f"terminal counted {counts}")
@@ -197,6 +203,52 @@ def check_remeasure(bin_dir, results_dir, workdir):
     check_same_as_daemon(daemon, stopped, sequences=sorted(written))
     c = json.load(open(os.path.join(stopped, "comparison.json")))
     assert 1 <= len(written) < len(parts) and c["parts"] == len(written), (len(written), c)
-    assert "stopped" in open(os.path.join(stopped, "remeasure.html")).read().lower()
-    print(f"remeasure stopped by Ctrl-C after part 1: exit 130, {len(written)} of {len(parts)} "
-          f"parts written, each equal to the daemon's, the page says it was stopped")
+    assert sorted(written) == sorted(parts)[:len(written)], \
+        f"written {sorted(written)}: not the first parts in order"
+    assert "Stopped before the end" in open(os.path.join(stopped, "remeasure.html")).read()
+    print(f"remeasure stopped by Ctrl-C after part 1: exit 130, the first {len(written)} of "
+          f"{len(parts)} parts written, each equal to the daemon's, the page says it was stopped")
+    check_bad_input(hotgauge, daemon, results_dir, workdir)
+
+
+def check_bad_input(hotgauge, daemon, results_dir, workdir):
+    """A part whose archived recording is gone is listed with why and the others are measured;
+    a recipe of another part is refused naming both; --out on the results read is refused."""
+    lost = min(s for s, j in daemon.items() if "verification" not in j)
+    copy = os.path.join(workdir, "results-one-lost")
+    os.makedirs(copy)
+    for path in glob.glob(os.path.join(results_dir, "*.jsonl")):
+        with open(path) as f, open(os.path.join(copy, os.path.basename(path)), "w") as out:
+            for text in f:
+                j = json.loads(text)
+                if j["sequence"] == lost:
+                    j["archived_as"] = j["archived_as"] + ".deleted-for-the-quota"
+                out.write(json.dumps(j) + "\n")
+    out_dir = os.path.join(workdir, "remeasure-one-lost")
+    r = subprocess.run([hotgauge, "remeasure", copy, "--out", out_dir, "--recipe", RECIPE],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, f"remeasure with a recording gone: exit {r.returncode}: {r.stderr}"
+    c = json.load(open(os.path.join(out_dir, "comparison.json")))
+    left = {n["sequence"]: n["why"] for n in c["not_remeasured"]}
+    parts = [s for s, j in daemon.items() if "verification" not in j]
+    assert list(left) == [lost] and "gone" in left[lost], left
+    assert c["parts"] == len(parts) - 1 == c["unchanged"], c
+    print(f"remeasure with part {lost}'s recording gone: listed ({left[lost][-60:]}), the other "
+          f"{c['parts']} measured")
+
+    with open(RECIPE) as f:
+        other = yaml.safe_load(f)
+    other["part"] = "hub-z"
+    other_path = os.path.join(workdir, "hub-z.yaml")
+    with open(other_path, "w") as f:
+        yaml.safe_dump(other, f, sort_keys=False)
+    r = subprocess.run([hotgauge, "remeasure", results_dir, "--out",
+                        os.path.join(workdir, "remeasure-hub-z"), "--recipe", other_path],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 1 and "hub-z" in r.stderr and "hub-a" in r.stderr, \
+        f"another part's recipe: exit {r.returncode}, {r.stderr}"
+    r = subprocess.run([hotgauge, "remeasure", results_dir, "--out",
+                        os.path.dirname(os.path.abspath(results_dir)), "--recipe", RECIPE],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 1 and "give --out another folder" in r.stderr, r.stderr
+    print("remeasure refuses another part's recipe naming both, and --out on the results read")

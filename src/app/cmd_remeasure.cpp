@@ -58,15 +58,19 @@ struct Job {
 };
 
 // Ctrl-C (SIGINT) and SIGTERM: no new part is started; the parts being measured finish and are
-// written with everything before them.
-volatile std::sig_atomic_t g_stop = 0;
-extern "C" void on_stop_signal(int) { g_stop = 1; }
+// written with everything before them. A second one ends the process (SA_RESETHAND). A results
+// line that cannot be written stops the run too (g_write_failed), as an error.
+std::atomic<bool> g_interrupted{false}, g_write_failed{false};
+static_assert(std::atomic<bool>::is_always_lock_free, "set from a signal handler");
+extern "C" void on_stop_signal(int) { g_interrupted = true; }
+bool stopping() { return g_interrupted || g_write_failed; }
 
 class StopSignals {
   public:
     StopSignals() {
         struct sigaction sa {};
         sa.sa_handler = on_stop_signal;
+        sa.sa_flags = SA_RESETHAND;
         sigemptyset(&sa.sa_mask);
         sigaction(SIGINT, &sa, &old_int_);
         sigaction(SIGTERM, &sa, &old_term_);
@@ -121,23 +125,30 @@ core::Result<std::vector<Job>> archived_parts(const RemeasureArgs& a,
     return jobs;
 }
 
-// Every recipe the jobs need read once, with its model; a part whose recipe is not the one given
-// is left out with why, and when no part is left the run is refused naming both.
+// Every recipe the jobs need read once, with its model. A part whose recipe cannot be had (not
+// the one given, a shipped recipe that cannot be read) is left out with why; when no part is
+// left the run is refused, naming every recipe and why.
 core::Result<void> prepare(const RemeasureArgs& a, std::vector<Job>& jobs, Setup& s,
                            std::vector<results::NotRemeasured>& left) {
     std::vector<Job> kept;
-    std::string refused;
+    std::map<std::string, std::string> refused;  // recipe name -> why
     for (auto& job : jobs) {
-        auto recipe = recipe_for(a, job.before.recipe, s);
-        if (recipe) {
-            kept.push_back(std::move(job));
-            continue;
+        const std::string& name = job.before.recipe;
+        if (!refused.contains(name)) {
+            auto recipe = recipe_for(a, name, s);
+            if (recipe) {
+                kept.push_back(std::move(job));
+                continue;
+            }
+            refused[name] = recipe.error().message;
         }
-        if (a.recipe.empty()) return recipe.error();  // a shipped recipe that cannot be read
-        refused = recipe.error().message;
-        left.push_back({job.before.sequence, job.before.part_id, refused});
+        left.push_back({job.before.sequence, job.before.part_id, refused[name]});
     }
-    if (kept.empty() && !refused.empty()) return core::make_error(refused);
+    if (kept.empty() && !refused.empty()) {
+        std::string why;
+        for (const auto& [name, what] : refused) why += (why.empty() ? "" : "; ") + what;
+        return core::make_error(why);
+    }
     jobs = std::move(kept);
     if (!a.calibration.empty()) {
         auto cal = calib::read_calibration(a.calibration);
@@ -180,7 +191,7 @@ void measure_all(const RemeasureArgs& a, const Setup& s, std::vector<Job>& jobs,
     std::mutex m;
     std::condition_variable cv;
     auto work = [&] {
-        for (std::size_t i; !g_stop && (i = next++) < jobs.size();) {
+        for (std::size_t i; !stopping() && (i = next++) < jobs.size();) {
             try {
                 measure_one(a, s, jobs[i]);
             } catch (const std::exception& e) {  // a part that breaks the pipeline: not the run
@@ -240,8 +251,7 @@ core::Result<void> measure_and_write(const RemeasureArgs& a, const Setup& s, std
     std::size_t written = 0;
     std::string error;
     measure_all(a, s, jobs, workers, [&](std::size_t ready) {
-        if (!error.empty()) return;
-        for (; written < ready; ++written) {
+        for (; written < ready && error.empty(); ++written) {
             Job& job = jobs[written];
             if (!job.result) {
                 out.left.push_back({job.before.sequence, job.before.part_id, job.failure});
@@ -249,10 +259,11 @@ core::Result<void> measure_and_write(const RemeasureArgs& a, const Setup& s, std
             }
             auto after = write_one(*log, job);
             job.result.reset();  // its profiles and clouds are not needed any more
-            if (!after) {
-                g_stop = 1;  // the out folder cannot take results: stop, keep what is written
+            if (!after) {        // the out folder takes no more: stop, keep what is written
+                g_write_failed = true;
                 error = after.error().message;
-                break;
+                out.left.push_back({job.before.sequence, job.before.part_id, error});
+                continue;
             }
             out.before.push_back(job.before);
             out.after.push_back(std::move(*after));
@@ -260,8 +271,11 @@ core::Result<void> measure_and_write(const RemeasureArgs& a, const Setup& s, std
         }
         progress.update(written);
     });
-    progress.finish(written, g_stop && error.empty()
-                                 ? "stopped: " + std::to_string(written) + " of " +
+    for (std::size_t i = written; i < jobs.size() && !error.empty(); ++i)
+        out.left.push_back({jobs[i].before.sequence, jobs[i].before.part_id,
+                            "not written: an earlier part's results line could not be"});
+    progress.finish(written, g_interrupted && error.empty()
+                                 ? "stopped: " + std::to_string(out.measured) + " of " +
                                        std::to_string(jobs.size()) + " parts measured again"
                                  : "");
     if (!error.empty()) return core::make_error(error);
@@ -281,7 +295,7 @@ core::Result<void> report(const RemeasureArgs& a, const Outcome& out, std::size_
     info.parts_in_range = in_range;
     info.parts_measured = out.measured;
     info.wall_s = wall_s;
-    info.stopped = g_stop != 0;
+    info.stopped = g_interrupted && !g_write_failed;
     info.generated_at = results::local_iso8601(core::realtime_ns());
     for (const auto& [name, text] :
          {std::pair{"comparison.json", results::comparison_json(c)},
@@ -306,8 +320,29 @@ void keep_freed_memory() {
 #endif
 }
 
+// OUT/results must be a folder of its own: not the daemon's results folder, and without results
+// of an earlier run (its lines would be read as this run's).
+core::Result<void> check_out(const RemeasureArgs& a) {
+    const fs::path results = fs::path(a.out) / "results";
+    std::error_code ec;
+    if (fs::exists(results, ec) && fs::equivalent(results, a.results_dir, ec))
+        return core::make_error(results.string() + " is " + a.results_dir +
+                                ", the results read: give --out another folder");
+    for (fs::directory_iterator it(results, ec), end; !ec && it != end; it.increment(ec))
+        if (it->path().extension() == ".jsonl")
+            return core::make_error(results.string() + " holds results already (" +
+                                    it->path().filename().string() +
+                                    "): give --out an empty or new folder");
+    return {};
+}
+
 int run(const RemeasureArgs& a) {
-    g_stop = 0;
+    g_interrupted = false;
+    g_write_failed = false;
+    if (auto ok = check_out(a); !ok) {
+        spdlog::error("{}", ok.error().message);
+        return 1;
+    }
     keep_freed_memory();
     StopSignals signals;
     const auto t0 = std::chrono::steady_clock::now();
@@ -331,8 +366,9 @@ int run(const RemeasureArgs& a) {
                  out.measured, in_range, wall_s,
                  static_cast<double>(out.measured) / std::max(wall_s, 1e-9),
                  (fs::path(a.out) / "results").string());
-    if (g_stop) return 130;  // as a shell reports a job stopped by Ctrl-C
-    return ok && out.measured > 0 ? 0 : 1;
+    if (!ok) return 1;
+    if (g_interrupted) return 130;  // as a shell reports a job stopped by Ctrl-C
+    return out.measured > 0 ? 0 : 1;
 }
 
 }  // namespace

@@ -133,9 +133,11 @@ std::vector<CornerPoint> corner_points(const std::vector<const FaceFrame*>& fram
     const double h_max = std::max(depth, kAbove), c_off = (c - ep.axis2d()).norm();
     const double lo = side > 0 ? R - s_in : R - s_out, hi = side > 0 ? R + s_out : R + s_in;
     constexpr double kRoundingMm = 1e-3;  // r is a float
+    // A corner whose numbers are not finite (a fit gone wrong): no bound, the full test decides.
+    const bool bounded = std::isfinite(c_off) && std::isfinite(lo) && std::isfinite(hi);
     auto maybe_in = [&](double r) {
         const double e = c_off + (h_max + r * sin_t) / nz + kRoundingMm;
-        return r + e >= lo && r - e <= hi;
+        return !bounded || (r + e >= lo && r - e <= hi);
     };
     std::vector<CornerPoint> out;
     for (std::size_t face = 0; face < frames.size(); ++face) {

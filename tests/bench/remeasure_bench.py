@@ -12,7 +12,7 @@ vibration), each archived PARTS/DISTINCT times (a symbolic link), with a results
 the daemon's format whose `part` is that recording's `hotgauge measure --json`. The old way is
 timed on OLD_PARTS of them (it is slow); parts/s is what is compared.
 
-With --baseline-bin-dir (a build of an earlier commit, e.g. `make bench BENCH_BASELINE=HEAD~1`),
+With --baseline-bin-dir (a build of an earlier commit: `make bench` builds the previous one),
 also stage by stage: `hotgauge measure --threads 1` of the distinct parts with both builds,
 alternating, medians per stage.
 
