@@ -27,19 +27,15 @@ import time
 
 import yaml
 
+import report_check
+
 REPO = os.path.abspath(os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 RECIPE = os.path.join(REPO, "config", "parts", "hub-a.yaml")
 
 
 def result_lines(results_dir):
-    lines = {}
-    for path in sorted(glob.glob(os.path.join(results_dir, "*.jsonl"))):
-        with open(path) as f:
-            for text in f:
-                if text.strip():
-                    j = json.loads(text)
-                    lines[j["sequence"]] = j
-    return lines
+    """The results lines of a folder by sequence (report_check.result_lines: the last of each)."""
+    return {j["sequence"]: j for j in report_check.result_lines(results_dir)}
 
 
 def without_wall_times(value):
@@ -139,7 +135,6 @@ def page_rows(html, table):
     """The rows of the page's table `table` as headless Chromium rendered them (report_check.py):
     the page parses, and says what the comparison says."""
     import html as html_text
-    import report_check
     dom = report_check.chromium("--dump-dom", "file://" + os.path.abspath(html))
     body = re.search(rf"<table class=\"{table}\">(.*?)</table>", dom, re.S)
     assert body, f"{html}: no table '{table}' rendered"

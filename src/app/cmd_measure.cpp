@@ -50,9 +50,7 @@ std::optional<pipeline::PartResult> measure_job(const MeasureJob& a, core::Recor
             spdlog::warn("{}: method {}: the faces' geometry is not measured", a.calibration,
                          cal->method);
     }
-    const std::string recipe_path =
-        a.recipe.empty() ? std::string(HOTGAUGE_CONFIG_DIR "/parts/") + rec->recipe + ".yaml"
-                         : a.recipe;
+    const std::string recipe_path = a.recipe.empty() ? shipped_recipe(rec->recipe) : a.recipe;
     auto recipe = io::read_recipe(recipe_path);
     if (!recipe) {
         spdlog::error("{}", recipe.error().message);

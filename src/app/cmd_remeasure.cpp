@@ -92,8 +92,7 @@ class StopSignals {
 core::Result<const core::Recipe*> recipe_for(const RemeasureArgs& a, const std::string& name,
                                              Setup& s) {
     if (auto it = s.recipes.find(name); it != s.recipes.end()) return &it->second;
-    const std::string path =
-        a.recipe.empty() ? std::string(HOTGAUGE_CONFIG_DIR "/parts/") + name + ".yaml" : a.recipe;
+    const std::string path = a.recipe.empty() ? shipped_recipe(name) : a.recipe;
     auto recipe = io::read_recipe(path);
     if (!recipe) return recipe.error();
     if (recipe->name != name)

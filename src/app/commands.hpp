@@ -29,6 +29,12 @@ Command add_report_part(CLI::App* report);
 Command add_export(CLI::App& app);
 Command add_remeasure(CLI::App& app);
 
+// The shipped recipe of part `part` (config/parts/<part>.yaml): the recipe a recording is
+// measured with when none is given (`measure`, `verify`, `remeasure`).
+inline std::string shipped_recipe(const std::string& part) {
+    return std::string(HOTGAUGE_CONFIG_DIR "/parts/") + part + ".yaml";
+}
+
 // The measure job, shared by `measure` and `verify`: read the recording, take the calibration's
 // geometry, read the recipe, the pose or model, run the pipeline.
 struct MeasureJob {
