@@ -2,6 +2,8 @@
 // model x = a_i + b_i·z (docs/measurement.md, "Preparation" and "Corrupt samples").
 #include "frame.hpp"
 
+#include <bit>
+
 namespace hotgauge::measure::detail {
 namespace {
 
@@ -13,32 +15,63 @@ constexpr double kMinSlopeVarZMm2 = 1.0;
 // Per-column sums of the camera-frame samples, for the least-squares ray line x = a + b·z of
 // each column. A sensor computes (x, z) from (column, row) through its calibration, so every
 // sample of a column lies on that column's ray whatever it hit: one pass, no outliers to reject.
+// One array per sum, so that a profile's columns are added in one vector loop.
+// A sample with a return: both coordinates finite. Written without branches for the vector loops
+// (a NaN compares false).
+inline bool is_return(float x, float z) {
+    constexpr float kMax = std::numeric_limits<float>::max();
+    return (std::abs(x) <= kMax) & (std::abs(z) <= kMax);
+}
+
+inline float masked(float v, std::uint32_t mask) {
+    return std::bit_cast<float>(std::bit_cast<std::uint32_t>(v) & mask);
+}
+
 struct ColumnSums {
-    double s = 0, sz = 0, sx = 0, szz = 0, szx = 0;
-    void add(double x, double z) {
-        s += 1;
-        sz += z;
-        sx += x;
-        szz += z * z;
-        szx += z * x;
+    std::vector<double> s, sz, sx, szz, szx;
+    explicit ColumnSums(std::int64_t w)
+        : s(w, 0.0), sz(w, 0.0), sx(w, 0.0), szz(w, 0.0), szx(w, 0.0) {}
+    void add(std::int64_t i, double x, double z) {
+        s[i] += 1;
+        sz[i] += z;
+        sx[i] += x;
+        szz[i] += z * z;
+        szx[i] += z * x;
+    }
+    void clear(std::int64_t i) { s[i] = sz[i] = sx[i] = szz[i] = szx[i] = 0.0; }
+    // Adds the samples of one profile's columns [first, end) that have a return. A sample
+    // without one adds zeros, which leave every sum's bits as they were (the sums start at +0).
+    void add_profile(const float* row, std::int64_t first, std::int64_t end) {
+        double *s_ = s.data(), *sz_ = sz.data(), *sx_ = sx.data(), *szz_ = szz.data(),
+               *szx_ = szx.data();
+#pragma omp simd
+        for (std::int64_t i = first; i < end; ++i) {
+            const float xf = row[2 * i], zf = row[2 * i + 1];
+            // All bits kept with a return, +0 without (a select that GCC vectorizes).
+            const std::uint32_t keep = 0u - static_cast<std::uint32_t>(is_return(xf, zf));
+            const double x = masked(xf, keep), z = masked(zf, keep);
+            s_[i] += masked(1.0f, keep);
+            sz_[i] += z;
+            sx_[i] += x;
+            szz_[i] += z * z;
+            szx_[i] += z * x;
+        }
     }
 };
 
-void fit_columns(const std::vector<ColumnSums>& sums, std::vector<double>& a,
-                 std::vector<double>& b) {
-    const auto w = static_cast<std::int64_t>(sums.size());
+void fit_columns(const ColumnSums& c, std::vector<double>& a, std::vector<double>& b) {
+    const auto w = static_cast<std::int64_t>(c.s.size());
     a.assign(w, kNaN);
     b.assign(w, kNaN);
     std::vector<double> mean_x(w, kNaN), mean_z(w, kNaN);
     for (std::int64_t i = 0; i < w; ++i) {
-        const ColumnSums& c = sums[i];
-        if (c.s < 1) continue;
-        mean_x[i] = c.sx / c.s;
-        mean_z[i] = c.sz / c.s;
-        const double var_z = c.szz / c.s - mean_z[i] * mean_z[i];
+        if (c.s[i] < 1) continue;
+        mean_x[i] = c.sx[i] / c.s[i];
+        mean_z[i] = c.sz[i] / c.s[i];
+        const double var_z = c.szz[i] / c.s[i] - mean_z[i] * mean_z[i];
         // Too little depth spread to see the slope:
-        if (c.s < kMinSlopeSamples || var_z < kMinSlopeVarZMm2) continue;
-        b[i] = (c.szx / c.s - mean_x[i] * mean_z[i]) / var_z;
+        if (c.s[i] < kMinSlopeSamples || var_z < kMinSlopeVarZMm2) continue;
+        b[i] = (c.szx[i] / c.s[i] - mean_x[i] * mean_z[i]) / var_z;
         a[i] = mean_x[i] - b[i] * mean_z[i];
     }
     // Columns without a determined slope: interpolate the slope between determined neighbours
@@ -76,7 +109,7 @@ void fit_columns(const std::vector<ColumnSums>& sums, std::vector<double>& a,
 }
 
 // The columns of a profile from its first sample with a return to after its last (a side face's
-// profile sees the part in a fifth of its width): the second pass visits only these.
+// profile sees the part in a fifth of its width): the loops over a profile visit only these.
 struct ColumnSpan {
     std::int64_t first = 0, end = 0;
 };
@@ -85,26 +118,26 @@ struct ColumnSpan {
 // that column's line: columns with a sample farther than kRayToleranceMm from their line are
 // fitted again from the samples near a robust (median) line.
 void refit_off_ray_columns(const core::FaceScan& f, const std::vector<ColumnSpan>& spans,
-                           std::vector<ColumnSums>& sums, std::vector<double>& a,
-                           std::vector<double>& b) {
+                           ColumnSums& sums, std::vector<double>& a, std::vector<double>& b) {
     constexpr double kRayToleranceMm = 0.5;
     const std::int64_t n = f.n_profiles(), w = f.width;
-    std::vector<std::uint8_t> bad(static_cast<std::size_t>(w), 0);
-    bool any = false;
+    std::vector<std::int32_t> off(static_cast<std::size_t>(w), 0);  // samples off the ray
+    const double *a_ = a.data(), *b_ = b.data();
+    std::int32_t* off_ = off.data();
     for (std::int64_t k = 0; k < n; ++k) {
         const float* row = f.profiles_mm.data() + k * w * 2;  // (x, z) per column
+        // Without a return, or on a column without a slope (NaN), the test is false.
+#pragma omp simd
         for (std::int64_t i = spans[k].first; i < spans[k].end; ++i) {
-            const double x = row[2 * i], z = row[2 * i + 1];
-            if (!std::isfinite(x) || !std::isfinite(z) || std::isnan(b[i])) continue;
-            if (std::abs(x - a[i] - b[i] * z) > kRayToleranceMm) {
-                bad[i] = 1;
-                any = true;
-            }
+            const float xf = row[2 * i], zf = row[2 * i + 1];
+            const double x = xf, z = zf;
+            off_[i] += is_return(xf, zf) & (std::abs(x - a_[i] - b_[i] * z) > kRayToleranceMm);
         }
     }
+    const bool any = std::any_of(off.begin(), off.end(), [](std::int32_t v) { return v != 0; });
     if (!any) return;
     for (std::int64_t i = 0; i < w; ++i) {
-        if (!bad[i]) continue;
+        if (!off[i]) continue;
         std::vector<double> xs, zs, ratio, icpt;
         for (std::int64_t k = 0; k < n; ++k) {
             const double x = f.x(k, i), z = f.z(k, i);
@@ -114,7 +147,7 @@ void refit_off_ray_columns(const core::FaceScan& f, const std::vector<ColumnSpan
                 ratio.push_back(x / z);
             }
         }
-        sums[i] = ColumnSums{};
+        sums.clear(i);
         if (xs.empty()) continue;
         std::nth_element(ratio.begin(), ratio.begin() + ratio.size() / 2, ratio.end());
         const double b0 = ratio[ratio.size() / 2];
@@ -122,10 +155,70 @@ void refit_off_ray_columns(const core::FaceScan& f, const std::vector<ColumnSpan
         std::nth_element(icpt.begin(), icpt.begin() + icpt.size() / 2, icpt.end());
         const double a0 = icpt[icpt.size() / 2];
         for (std::size_t j = 0; j < xs.size(); ++j)
-            if (std::abs(xs[j] - a0 - b0 * zs[j]) <= kRayToleranceMm) sums[i].add(xs[j], zs[j]);
+            if (std::abs(xs[j] - a0 - b0 * zs[j]) <= kRayToleranceMm) sums.add(i, xs[j], zs[j]);
     }
     fit_columns(sums, a, b);
 }
+
+// Whether columns [i, i + kBlock) hold a return: one vector test per block, for the long runs
+// without a return on either side of a side face's part.
+constexpr std::int64_t kSpanBlock = 16;
+bool block_has_return(const float* row, std::int64_t i) {
+    std::uint32_t any = 0;
+#pragma omp simd reduction(| : any)
+    for (std::int64_t j = i; j < i + kSpanBlock; ++j) any |= is_return(row[2 * j], row[2 * j + 1]);
+    return any != 0;
+}
+
+ColumnSpan row_span(const float* row, std::int64_t w) {
+    ColumnSpan span;
+    while (span.first + kSpanBlock <= w && !block_has_return(row, span.first))
+        span.first += kSpanBlock;
+    while (span.first < w && !is_return(row[2 * span.first], row[2 * span.first + 1])) ++span.first;
+    if (span.first == w) return {};
+    span.end = w;
+    while (span.end - kSpanBlock >= span.first && !block_has_return(row, span.end - kSpanBlock))
+        span.end -= kSpanBlock;
+    while (!is_return(row[2 * (span.end - 1)], row[2 * span.end - 1])) --span.end;
+    return span;
+}
+
+// One profile's samples in the part frame, column by column, and which of them lie inside the
+// part's bounding cylinder (`keep`). One vector loop: a sample without a return computes NaN
+// and is not kept.
+struct RowPoints {
+    std::vector<float> x, y, z;
+    std::vector<double> r2;  // squared distance from the part axis (its root only where kept)
+    std::vector<std::uint8_t> keep;
+    explicit RowPoints(std::int64_t w) : x(w), y(w), z(w), r2(w), keep(w) {}
+
+    // p = M·(x, 0, z) + origin, each coordinate summed in the order Eigen's 3×3 product sums it
+    // (the frame's samples keep the bits they had when this was `M * Vector3d(x, 0, z)`).
+    void transform(const float* row, ColumnSpan span, const Eigen::Matrix3d& M,
+                   const Eigen::Vector3d& o, double r_max, double z_lo, double z_hi) {
+        const double r2_max = r_max * r_max;
+        const double m00 = M(0, 0), m01 = M(0, 1), m02 = M(0, 2), m10 = M(1, 0), m11 = M(1, 1),
+                     m12 = M(1, 2), m20 = M(2, 0), m21 = M(2, 1), m22 = M(2, 2);
+        const double ox = o.x(), oy = o.y(), oz = o.z();
+        float *x_ = x.data(), *y_ = y.data(), *z_ = z.data();
+        double* r2_ = r2.data();
+        std::uint8_t* keep_ = keep.data();
+#pragma omp simd
+        for (std::int64_t i = span.first; i < span.end; ++i) {
+            const float xf = row[2 * i], zf = row[2 * i + 1];
+            const double sx = xf, sz = zf;
+            const double px = m00 * sx + m01 * 0.0 + m02 * sz + ox;
+            const double py = m10 * sx + m11 * 0.0 + m12 * sz + oy;
+            const double pz = m20 * sx + m21 * 0.0 + m22 * sz + oz;
+            const double d2 = px * px + py * py;
+            r2_[i] = d2;
+            x_[i] = static_cast<float>(px);
+            y_[i] = static_cast<float>(py);
+            z_[i] = static_cast<float>(pz);
+            keep_[i] = is_return(xf, zf) & (d2 <= r2_max) & (pz >= z_lo) & (pz <= z_hi);
+        }
+    }
+};
 
 // The near samples in scan order, in blocks of 1.5 MB: as one vector, a top face's 50 MB were
 // mapped from the kernel, zeroed and given back for every face (10-20 ms of system time a part in
@@ -190,34 +283,24 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
     fr.view = fr.M.col(2);
     fr.origin.resize(fr.n);
     NearBlocks near;
-    std::vector<ColumnSums> columns(static_cast<std::size_t>(fr.w));
+    ColumnSums columns(fr.w);
     std::vector<ColumnSpan> spans(static_cast<std::size_t>(fr.n));
-    const double r2_max = r_max * r_max;
+    RowPoints points(fr.w);
     for (std::int64_t k = 0; k < fr.n; ++k) {
         Eigen::Vector3d t =
             f.T_world_camera.translation() + f.profile_positions_mm[k] * f.scan_direction;
         if (u && static_cast<std::int64_t>(u->size()) == fr.n) t += (*u)[k];
         fr.origin[k] = T_part_world * t;
         const float* row = f.profiles_mm.data() + k * fr.w * 2;  // (x, z) per column
-        const bool left_out = fr.left_out(k);
-        // Local copies: the stores below could alias fr's members, which were then loaded again
-        // for every sample.
-        const Eigen::Matrix3d M = fr.M;
-        const Eigen::Vector3d origin = fr.origin[k];
-        ColumnSpan span;
-        for (std::int64_t i = 0; i < fr.w; ++i) {
-            const float x = row[2 * i], z = row[2 * i + 1];
-            if (!std::isfinite(x) || !std::isfinite(z)) continue;
-            if (span.end == 0) span.first = i;
-            span.end = i + 1;
-            columns[i].add(x, z);  // a column's ray does not depend on the compensation
-            if (left_out) continue;
-            const Eigen::Vector3d p = M * Eigen::Vector3d(x, 0.0, z) + origin;
-            const double r2 = p.x() * p.x() + p.y() * p.y();
-            if (!(r2 <= r2_max && p.z() >= z_lo && p.z() <= z_hi)) continue;  // NaN-safe
-            near.push_back({k * fr.w + i, p.cast<float>(), static_cast<float>(std::sqrt(r2))});
-        }
-        spans[k] = span;
+        const ColumnSpan span = spans[k] = row_span(row, fr.w);
+        columns.add_profile(row, span.first, span.end);  // the ray ignores the compensation
+        if (fr.left_out(k)) continue;
+        points.transform(row, span, fr.M, fr.origin[k], r_max, z_lo, z_hi);
+        for (std::int64_t i = span.first; i < span.end; ++i)
+            if (points.keep[i])
+                near.push_back({k * fr.w + i,
+                                {points.x[i], points.y[i], points.z[i]},
+                                static_cast<float>(std::sqrt(points.r2[i]))});
     }
     fit_columns(columns, fr.col_a, fr.col_b);
     refit_off_ray_columns(f, spans, columns, fr.col_a, fr.col_b);
