@@ -69,10 +69,10 @@ Surface::Surface(const Model& model) : model_(model) {
     half_size_ = 0.5f * (hi_ - lo_).norm();
 }
 
-float Surface::Seg::distance(float r, float z, float& t) const {
+float Surface::Seg::distance2(float r, float z, float& t) const {
     t = std::clamp((r - r0) * ur + (z - z0) * uz, 0.0f, len);
     const float dr = r0 + t * ur - r, dz = z0 + t * uz - z;
-    return std::sqrt(dr * dr + dz * dz);
+    return dr * dr + dz * dz;
 }
 
 void Surface::build_profile_grid() {
@@ -99,7 +99,7 @@ void Surface::build_profile_grid() {
             float bound = std::numeric_limits<float>::max();
             for (std::size_t k = 0; k < segs_.size(); ++k) {
                 float t;
-                const float dc = segs_[k].distance(rc, zc, t);
+                const float dc = std::sqrt(segs_[k].distance2(rc, zc, t));
                 dmin[k] = std::max(0.0f, dc - half_diag);
                 bound = std::min(bound, dc + half_diag);
             }
@@ -155,12 +155,18 @@ Closest Surface::closest_profile(const Eigen::Vector3f& q, float scale) const {
     const std::size_t c = in_grid ? static_cast<std::size_t>(a * nz_ + b) : 0;
     const std::size_t k0 = in_grid ? cell_begin_[c] : 0;
     const std::size_t k1 = in_grid ? cell_begin_[c + 1] : segs_.size();
+    // The nearest by distance, the first of equals. The root is taken only for a segment whose
+    // squared distance is smaller than the best's (a necessary condition, the root rounding
+    // monotonically).
+    float best2 = std::numeric_limits<float>::infinity();
     for (std::size_t k = k0; k < k1; ++k) {
         const std::size_t si = in_grid ? cell_segs_[k] : k;
         float t;
-        const float d = segs_[si].distance(rs, zs, t);
-        if (d < best) {
+        const float d2 = segs_[si].distance2(rs, zs, t);
+        if (!(d2 < best2)) continue;
+        if (const float d = std::sqrt(d2); d < best) {
             best = d;
+            best2 = d2;
             t_best = t;
             seg = static_cast<int>(si);
         }

@@ -87,8 +87,9 @@ class Surface {
     struct Seg {
         float r0, z0, ur, uz, len;  // start, unit direction, length
         float nr, nz;               // outward unit normal (the material is on the left)
-        // Distance from (r, z) to the segment; t: where its closest point is, in [0, len].
-        float distance(float r, float z, float& t) const;
+        // Squared distance from (r, z) to the segment; t: where its closest point is, in
+        // [0, len].
+        float distance2(float r, float z, float& t) const;
     };
     std::vector<Seg> segs_;
     float cell_mm_ = 1, r0_ = 0, z0_ = 0;
