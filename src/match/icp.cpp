@@ -157,7 +157,8 @@ Closest Surface::closest_profile(const Eigen::Vector3f& q, float scale) const {
     const std::size_t k1 = in_grid ? cell_begin_[c + 1] : segs_.size();
     // The nearest by distance, the first of equals. The root is taken only for a segment whose
     // squared distance is smaller than the best's (a necessary condition, the root rounding
-    // monotonically).
+    // monotonically). Not sufficient: two squared distances can round to the same root, and
+    // then the first segment must stay the nearest, as it was when roots were compared.
     float best2 = std::numeric_limits<float>::infinity();
     for (std::size_t k = k0; k < k1; ++k) {
         const std::size_t si = in_grid ? cell_segs_[k] : k;

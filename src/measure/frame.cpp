@@ -12,21 +12,26 @@ namespace {
 constexpr int kMinSlopeSamples = 10;
 constexpr double kMinSlopeVarZMm2 = 1.0;
 
-// Per-column sums of the camera-frame samples, for the least-squares ray line x = a + b·z of
-// each column. A sensor computes (x, z) from (column, row) through its calibration, so every
-// sample of a column lies on that column's ray whatever it hit: one pass, no outliers to reject.
-// One array per sum, so that a profile's columns are added in one vector loop.
 // A sample with a return: both coordinates finite. Written without branches for the vector loops
 // (a NaN compares false).
 inline bool is_return(float x, float z) {
     constexpr float kMax = std::numeric_limits<float>::max();
     return (std::abs(x) <= kMax) & (std::abs(z) <= kMax);
 }
+// Column i of a profile row (x, z per column).
+inline bool has_return(const float* row, std::int64_t i) {
+    return is_return(row[2 * i], row[2 * i + 1]);
+}
 
+// v with its bits and-ed with mask: v itself (mask all ones) or +0 (mask zero).
 inline float masked(float v, std::uint32_t mask) {
     return std::bit_cast<float>(std::bit_cast<std::uint32_t>(v) & mask);
 }
 
+// Per-column sums of the camera-frame samples, for the least-squares ray line x = a + b·z of
+// each column. A sensor computes (x, z) from (column, row) through its calibration, so every
+// sample of a column lies on that column's ray whatever it hit: one pass, no outliers to reject.
+// One array per sum, so that a profile's columns are added in one vector loop.
 struct ColumnSums {
     std::vector<double> s, sz, sx, szz, szx;
     explicit ColumnSums(std::int64_t w)
@@ -121,7 +126,9 @@ void refit_off_ray_columns(const core::FaceScan& f, const std::vector<ColumnSpan
                            ColumnSums& sums, std::vector<double>& a, std::vector<double>& b) {
     constexpr double kRayToleranceMm = 0.5;
     const std::int64_t n = f.n_profiles(), w = f.width;
-    std::vector<std::int32_t> off(static_cast<std::size_t>(w), 0);  // samples off the ray
+    // Per column, how many samples lie off the ray (only whether any does is used; a count, so
+    // that the loop below vectorizes).
+    std::vector<std::int32_t> off(static_cast<std::size_t>(w), 0);
     const double *a_ = a.data(), *b_ = b.data();
     std::int32_t* off_ = off.data();
     for (std::int64_t k = 0; k < n; ++k) {
@@ -160,13 +167,13 @@ void refit_off_ray_columns(const core::FaceScan& f, const std::vector<ColumnSpan
     fit_columns(sums, a, b);
 }
 
-// Whether columns [i, i + kBlock) hold a return: one vector test per block, for the long runs
-// without a return on either side of a side face's part.
+// Whether columns [i, i + kSpanBlock) hold a return: one vector test per block, for the long
+// runs without a return on either side of a side face's part.
 constexpr std::int64_t kSpanBlock = 16;
 bool block_has_return(const float* row, std::int64_t i) {
     std::uint32_t any = 0;
 #pragma omp simd reduction(| : any)
-    for (std::int64_t j = i; j < i + kSpanBlock; ++j) any |= is_return(row[2 * j], row[2 * j + 1]);
+    for (std::int64_t j = i; j < i + kSpanBlock; ++j) any |= has_return(row, j);
     return any != 0;
 }
 
@@ -174,33 +181,36 @@ ColumnSpan row_span(const float* row, std::int64_t w) {
     ColumnSpan span;
     while (span.first + kSpanBlock <= w && !block_has_return(row, span.first))
         span.first += kSpanBlock;
-    while (span.first < w && !is_return(row[2 * span.first], row[2 * span.first + 1])) ++span.first;
+    while (span.first < w && !has_return(row, span.first)) ++span.first;
     if (span.first == w) return {};
     span.end = w;
     while (span.end - kSpanBlock >= span.first && !block_has_return(row, span.end - kSpanBlock))
         span.end -= kSpanBlock;
-    while (!is_return(row[2 * (span.end - 1)], row[2 * span.end - 1])) --span.end;
+    while (!has_return(row, span.end - 1)) --span.end;
     return span;
 }
 
 // One profile's samples in the part frame, column by column, and which of them lie inside the
-// part's bounding cylinder (`keep`). One vector loop: a sample without a return computes NaN
-// and is not kept.
+// part's bounding cylinder (`keep`). One vector loop: a sample without a return computes NaN or
+// ±inf, and is_return leaves it out.
 struct RowPoints {
-    std::vector<float> x, y, z;
+    std::vector<double> x, y, z;
     std::vector<double> r2;  // squared distance from the part axis (its root only where kept)
     std::vector<std::uint8_t> keep;
     explicit RowPoints(std::int64_t w) : x(w), y(w), z(w), r2(w), keep(w) {}
 
-    // p = M·(x, 0, z) + origin, each coordinate summed in the order Eigen's 3×3 product sums it
-    // (the frame's samples keep the bits they had when this was `M * Vector3d(x, 0, z)`).
+    // p = M·(x, 0, z) + origin, as `M * Vector3d(x, 0, z) + origin` computed it before, to the
+    // bit: M's middle column times 0 is an exact ±0 (M is finite), so Eigen's grouping of the
+    // three products (its row 2 adds the last two first) gives the same sum, signed zeros
+    // included. Do not drop the `* 0.0` terms: that changes the sign of some zeros. (With FMA
+    // enabled, -march=haswell and up, Eigen fuses its products and the bits would differ.)
     void transform(const float* row, ColumnSpan span, const Eigen::Matrix3d& M,
                    const Eigen::Vector3d& o, double r_max, double z_lo, double z_hi) {
         const double r2_max = r_max * r_max;
         const double m00 = M(0, 0), m01 = M(0, 1), m02 = M(0, 2), m10 = M(1, 0), m11 = M(1, 1),
                      m12 = M(1, 2), m20 = M(2, 0), m21 = M(2, 1), m22 = M(2, 2);
         const double ox = o.x(), oy = o.y(), oz = o.z();
-        float *x_ = x.data(), *y_ = y.data(), *z_ = z.data();
+        double *x_ = x.data(), *y_ = y.data(), *z_ = z.data();
         double* r2_ = r2.data();
         std::uint8_t* keep_ = keep.data();
 #pragma omp simd
@@ -212,9 +222,9 @@ struct RowPoints {
             const double pz = m20 * sx + m21 * 0.0 + m22 * sz + oz;
             const double d2 = px * px + py * py;
             r2_[i] = d2;
-            x_[i] = static_cast<float>(px);
-            y_[i] = static_cast<float>(py);
-            z_[i] = static_cast<float>(pz);
+            x_[i] = px;  // to float where kept: a corrupt sample may not fit a float
+            y_[i] = py;
+            z_[i] = pz;
             keep_[i] = is_return(xf, zf) & (d2 <= r2_max) & (pz >= z_lo) & (pz <= z_hi);
         }
     }
@@ -292,15 +302,17 @@ FaceFrame make_frame(const core::FaceScan& f, const Eigen::Isometry3d& T_part_wo
         if (u && static_cast<std::int64_t>(u->size()) == fr.n) t += (*u)[k];
         fr.origin[k] = T_part_world * t;
         const float* row = f.profiles_mm.data() + k * fr.w * 2;  // (x, z) per column
-        const ColumnSpan span = spans[k] = row_span(row, fr.w);
+        const ColumnSpan span = row_span(row, fr.w);
+        spans[k] = span;
         columns.add_profile(row, span.first, span.end);  // the ray ignores the compensation
         if (fr.left_out(k)) continue;
         points.transform(row, span, fr.M, fr.origin[k], r_max, z_lo, z_hi);
         for (std::int64_t i = span.first; i < span.end; ++i)
             if (points.keep[i])
-                near.push_back({k * fr.w + i,
-                                {points.x[i], points.y[i], points.z[i]},
-                                static_cast<float>(std::sqrt(points.r2[i]))});
+                near.push_back(
+                    {k * fr.w + i,
+                     Eigen::Vector3d(points.x[i], points.y[i], points.z[i]).cast<float>(),
+                     static_cast<float>(std::sqrt(points.r2[i]))});
     }
     fit_columns(columns, fr.col_a, fr.col_b);
     refit_off_ray_columns(f, spans, columns, fr.col_a, fr.col_b);
