@@ -107,6 +107,27 @@ def truth_u_mm(vib, t):  # t: s from vib["time_reference_ns"]; (3, n) world mm
     return u
 
 
+def world_accel(d, fd):
+    """A face's accelerometer record (folder d, truth face_data fd) in world axes, resampled to a
+    uniform grid: (first sample's time in ns, grid step in s, (3, n) m/s²)."""
+    a = np.load(d + "/accel.npy").astype(float)
+    t_ns = np.load(d + "/accel_times.npy").astype(np.int64)
+    R = np.array(fd["camera_to_world"])[:3, :3] @ np.array(fd["accel_to_camera"])
+    aw = a @ R.T
+    ts = (t_ns - t_ns[0]) / 1e9
+    per = np.median(np.diff(ts))
+    tg = np.arange(int(ts[-1] / per) + 1) * per
+    return t_ns[0], per, np.array([np.interp(tg, ts, aw[:, k]) for k in range(3)])
+
+
+def straight_fill(x, gaps):
+    """x (one axis) with a straight line over each gap, as the gauge fills it before bridging."""
+    lin = x.copy()
+    for g0, g1 in gaps:
+        lin[g0:g1 + 1] = np.interp(np.arange(g0, g1 + 1), [g0 - 1, g1 + 1], [x[g0 - 1], x[g1 + 1]])
+    return lin
+
+
 def holes(n, loss, rng, per_datagram=20):
     lost = rng.random(n // per_datagram) < loss
     gaps, i = [], 0
@@ -133,27 +154,17 @@ def main():
     errors = {}
     for face, fd in truth["face_data"].items():
         d = f"{rec}/part/{face}"
-        a = np.load(d + "/accel.npy").astype(float)
-        t_ns = np.load(d + "/accel_times.npy").astype(np.int64)
         pt = np.load(d + "/profile_times.npy").astype(np.int64)
-        R = np.array(fd["camera_to_world"])[:3, :3] @ np.array(fd["accel_to_camera"])
-        aw = a @ R.T
-        ts = (t_ns - t_ns[0]) / 1e9
-        per = np.median(np.diff(ts))
-        n = int(ts[-1] / per) + 1
+        t0_ns, per, g = world_accel(d, fd)
+        n = g.shape[1]
         tg = np.arange(n) * per
-        g = np.array([np.interp(tg, ts, aw[:, k]) for k in range(3)])
         vib = fd["vibration"]
-        u_true = truth_u_mm(vib, tg + (t_ns[0] - vib["time_reference_ns"]) / 1e9) / 1000
-        scan = (tg >= (pt[0] - t_ns[0]) / 1e9) & (tg <= (pt[-1] - t_ns[0]) / 1e9)
+        u_true = truth_u_mm(vib, tg + (t0_ns - vib["time_reference_ns"]) / 1e9) / 1000
+        scan = (tg >= (pt[0] - t0_ns) / 1e9) & (tg <= (pt[-1] - t0_ns) / 1e9)
         rng = np.random.default_rng(sum(map(ord, face)))
         for _ in range(patterns):
             gaps = holes(n, loss, rng)
-            lin = g.copy()
-            for g0, g1 in gaps:
-                for k in range(3):
-                    lin[k, g0:g1 + 1] = np.interp(np.arange(g0, g1 + 1), [g0 - 1, g1 + 1],
-                                                  [g[k, g0 - 1], g[k, g1 + 1]])
+            lin = [straight_fill(g[k], gaps) for k in range(3)]
             est = {"noloss": [integrate(g[k], 1 / per) for k in range(3)],
                    "bridge": [bridge(lin[k], 1 / per, gaps) for k in range(3)],
                    "ar": [integrate(ar_fill(lin[k], gaps, p), 1 / per) for k in range(3)]}

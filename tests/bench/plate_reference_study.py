@@ -25,7 +25,8 @@ import numpy as np
 import yaml
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from hole_bridge_study import bridge, holes, integrate, truth_u_mm  # noqa: E402
+from hole_bridge_study import (bridge, holes, integrate, straight_fill,  # noqa: E402
+                               truth_u_mm, world_accel)
 
 PLATE_BAND_MM = 1.5
 PART_CLEAR_MM = 80.0
@@ -88,16 +89,11 @@ def main():
             print("%-6s %8d  (no plate in view)" % (face, np.median(count)))
             continue
         pt = np.load(d + "/profile_times.npy").astype(np.int64)
-        a = np.load(d + "/accel.npy").astype(float)
-        t_ns = np.load(d + "/accel_times.npy").astype(np.int64)
-        R = np.array(fd["camera_to_world"])[:3, :3] @ np.array(fd["accel_to_camera"])
-        az = (a @ R.T)[:, 2]
-        ts = (t_ns - t_ns[0]) / 1e9
-        per = np.median(np.diff(ts))
-        n = int(ts[-1] / per) + 1
+        t0_ns, per, accel = world_accel(d, fd)
+        g = accel[2]
+        n = len(g)
         tg = np.arange(n) * per
-        g = np.interp(tg, ts, az)
-        tp = (pt - t_ns[0]) / 1e9
+        tp = (pt - t0_ns) / 1e9
         vib = fd["vibration"]
         u_true = truth_u_mm(vib, (pt - vib["time_reference_ns"]) / 1e9)[2]
         prate = 1e9 / np.median(np.diff(pt))
@@ -108,19 +104,15 @@ def main():
             return low + (u_acc - lowpass(u_acc, prate, fc))
 
         u_acc = np.interp(tp, tg, integrate(g, 1 / per) * 1000)  # m -> mm
-        mid = np.ones(len(tp), bool)  # the record runs a second beyond the scan at each end
-        row = [np.abs(x - u_true)[mid] * 1000 for x in (plate, u_acc, fuse(u_acc))]
+        # Every profile: the record runs a second beyond the scan at each end.
+        row = [np.abs(x - u_true) * 1000 for x in (plate, u_acc, fuse(u_acc))]
         lossy = [[], []]
         rng = np.random.default_rng(sum(map(ord, face)))
         for _ in range(patterns):
             gaps = holes(n, loss, rng)
-            lin = g.copy()
-            for g0, g1 in gaps:
-                lin[g0:g1 + 1] = np.interp(np.arange(g0, g1 + 1), [g0 - 1, g1 + 1],
-                                           [g[g0 - 1], g[g1 + 1]])
-            ub = np.interp(tp, tg, bridge(lin, 1 / per, gaps) * 1000)
-            lossy[0].append(np.abs(ub - u_true)[mid] * 1000)
-            lossy[1].append(np.abs(fuse(ub) - u_true)[mid] * 1000)
+            ub = np.interp(tp, tg, bridge(straight_fill(g, gaps), 1 / per, gaps) * 1000)
+            lossy[0].append(np.abs(ub - u_true) * 1000)
+            lossy[1].append(np.abs(fuse(ub) - u_true) * 1000)
         row += [np.concatenate(v) for v in lossy]
         print("%-6s %8d " % (face, np.median(count)) +
               " ".join("%6.1f / %6.1f" % (rms(e), e.max()) for e in row))
