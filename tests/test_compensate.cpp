@@ -119,6 +119,61 @@ TEST(CompensateFace, ThreeHertzModeWithin20um) {
     }
 }
 
+// The support plate as a displacement sensor (docs/compensation.md "The support plate"):
+// impulsive blows (5 ms onset) and a 3 Hz mode put displacement below the high-pass that the
+// accelerometer cannot give back ("Why 1.5 Hz": 30-50 µm RMS in z). On the faces that see the
+// plate in every profile (this cell's top: its side sensors look across, not down), u_z from it
+// is within the issue's 5 µm RMS; the bottom sensor, below the plate, does not use it.
+TEST(CompensateFace, ThePlateGivesZUnderImpulsiveBlows) {
+    sim::CellConfig cell = env().cell;
+    cell.vibration.onset_s = 0.005;
+    cell.vibration.modes = {{3.0, 0.03, 0.6, Eigen::Vector3d(0.3, 0.2, 1.0).normalized()},
+                            {23.0, 0.03, 0.1, Eigen::Vector3d(1.0, 0.3, 0.2).normalized()}};
+    CompensationConfig accel_only;
+    accel_only.plate_z = false;
+    double worst_plate = 0, worst_accel = 0;
+    int faces = 0;
+    for (std::uint64_t seed : {4, 5, 6}) {
+        const auto s = simulate(cell, seed);
+        for (std::size_t j = 0; j < s.recording.faces.size(); ++j) {
+            const auto& face = s.recording.faces[j];
+            const auto with = compensate::compensate_face(face, {});
+            const auto without = compensate::compensate_face(face, accel_only);
+            if (face.name == "bottom") {
+                EXPECT_EQ(with.plate_profiles, 0) << "the bottom sensor looks up";
+                continue;
+            }
+            if (with.plate_profiles < face.n_profiles()) {  // this cell's side sensors look
+                std::printf("seed %llu %s: the plate in %lld of %lld profiles\n",  // across
+                            static_cast<unsigned long long>(seed), face.name.c_str(),
+                            static_cast<long long>(with.plate_profiles),
+                            static_cast<long long>(face.n_profiles()));
+                EXPECT_NE(face.name, "top");
+                continue;
+            }
+            ++faces;
+            double s2_plate = 0, s2_accel = 0;
+            for (std::size_t k = 0; k < with.displacement_mm.size(); ++k) {
+                const double t = s.truth.faces[j].displacement_mm[k].z();
+                s2_plate += std::pow(1000.0 * (with.displacement_mm[k].z() - t), 2);
+                s2_accel += std::pow(1000.0 * (without.displacement_mm[k].z() - t), 2);
+            }
+            const double n = static_cast<double>(with.displacement_mm.size());
+            const double plate = std::sqrt(s2_plate / n), accel = std::sqrt(s2_accel / n);
+            std::printf(
+                "seed %llu %s: z RMS %.2f um from the plate, %.2f um integrated (plate "
+                "median's sigma %.2f um)\n",
+                static_cast<unsigned long long>(seed), face.name.c_str(), plate, accel,
+                1000.0 * with.plate_sigma_mm);
+            worst_plate = std::max(worst_plate, plate);
+            worst_accel = std::max(worst_accel, accel);
+        }
+    }
+    EXPECT_GE(faces, 3);
+    EXPECT_LE(worst_plate, 5.0);
+    EXPECT_GT(worst_accel, 2.0 * worst_plate) << "the case must be one the accelerometer misses";
+}
+
 TEST(CompensateFace, ClockOffsetIsApplied) {
     // The accelerometer's clock runs 3 ms ahead: uncorrected, the 47 Hz mode is off in phase.
     auto s = simulate(env().cell, 6);
@@ -595,14 +650,14 @@ core::Recording with_lost_datagrams(const core::Recording& rec, double fraction,
 
 // |u_est − u_true| under random datagram loss (full-resolution cell, press blows, 10 ms holes at
 // random in the record), by a profile's distance from the nearest hole, beside the same profiles
-// without loss (docs/compensation.md "Holes at random"). The pad (degrade_pad_s) is read off
-// this table: beyond it the worst error is within twice the worst without loss. Measured
-// 2026-12-04, seeds 36-39: 0.1-0.2 s 72.5 µm worst, 0.4-0.5 s 40.5, 0.5-0.6 s 15.7 (10.3 without
-// loss); the single-hole table of GapErrorByDistanceIsWhyThePadExists, holes at fixed places
-// on the quick cell, had made it 0.1 s.
+// without loss (docs/compensation.md "Holes at random", "Holes in u"). Beyond the pad
+// (degrade_pad_s) what the bridge adds to the error, per axis, must stay within the σ that
+// hole_sigma_mm gives each feature's u; within it, it must not (why the pad is there). Measured
+// 2026-12-04, seeds 36-39: RMS 50.6 µm at 0-0.1 s, 14.2 at 0.1-0.2 s, 6.2-7.2 up to 0.5 s, 4.2
+// beyond 0.6 s.
 TEST(CompensateFace, RandomHolesErrorByDistance) {
-    constexpr int kBins = 9;
-    const double edges[kBins + 1] = {0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 100.0};
+    constexpr int kBins = 10;
+    const double edges[kBins + 1] = {0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 100.0};
     std::vector<double> s2(kBins, 0.0), base2(kBins, 0.0), worst(kBins, 0.0), n(kBins, 0.0);
     std::vector<double> base_worst(kBins, 0.0);
     compensate::CompensationConfig c;
@@ -644,17 +699,28 @@ TEST(CompensateFace, RandomHolesErrorByDistance) {
             }
         }
     }
-    std::printf("by distance from the nearest hole: RMS / worst; without loss: RMS / worst\n");
-    const double pad = compensate::CompensationConfig{}.degrade_pad_s;
+    std::printf(
+        "by distance from the nearest hole: RMS / worst; without loss: RMS / worst; "
+        "excess per axis against hole_sigma_mm\n");
+    const compensate::CompensationConfig defaults;
+    core::DisplacementNoise table;  // hole_sigma of one hole at 0, by distance
+    table.holes_s = {{0.0, 0.0}};
+    table.hole_sigma_mm = defaults.hole_sigma_mm;
+    std::vector<double> excess(kBins, 0.0);
     for (int b = 0; b < kBins; ++b) {
-        std::printf("  %4.2f-%4.2f s: %6.1f / %6.1f; %5.1f / %5.1f um (%g profiles)\n", edges[b],
-                    std::min(edges[b + 1], 9.9), std::sqrt(s2[b] / std::max(1.0, n[b])), worst[b],
-                    std::sqrt(base2[b] / std::max(1.0, n[b])), base_worst[b], n[b]);
-        if (edges[b] < pad - 1e-9 || n[b] == 0) continue;
-        EXPECT_LT(worst[b], 2.0 * base_worst[b] + 1.0) << "beyond the pad, bin " << b;
-        EXPECT_LT(s2[b], std::pow(1.5, 2) * base2[b] + n[b]) << "beyond the pad, bin " << b;
+        const double m = std::max(1.0, n[b]);
+        excess[b] = std::sqrt(std::max(0.0, s2[b] / m - base2[b] / m) / 3.0);
+        const double sigma_um = 1000.0 * table.hole_sigma(0, edges[b] + 1e-6);
+        std::printf(
+            "  %4.2f-%4.2f s: %6.1f / %6.1f; %5.1f / %5.1f um (%g profiles); %5.1f "
+            "against %5.1f um\n",
+            edges[b], std::min(edges[b + 1], 9.9), std::sqrt(s2[b] / m), worst[b],
+            std::sqrt(base2[b] / m), base_worst[b], n[b], excess[b], sigma_um);
+        if (edges[b] < defaults.degrade_pad_s - 1e-9 || n[b] == 0) continue;
+        EXPECT_LT(excess[b], 1.25 * sigma_um + 1.5) << "beyond the pad, bin " << b;
     }
-    EXPECT_GT(worst[1], 2.0 * base_worst[1]) << "0.1-0.2 s from a hole: why the pad is longer";
+    EXPECT_GT(excess[0], 1000.0 * table.hole_sigma(0, defaults.degrade_pad_s + 1e-6))
+        << "0-0.05 s from a hole: why the pad is there";
 }
 
 // Lost accelerometer datagrams must never make a good part NOK (issue 18 found 2–30 % loss
@@ -688,7 +754,8 @@ TEST(CompensatedMeasurement, LostDatagramsNeverMakeAGoodPartNok) {
                     const bool silhouette = f.reason.find("silhouette edge") != std::string::npos;
                     by_silhouette += silhouette;
                     EXPECT_TRUE(silhouette ||
-                                f.reason.find("untrusted profiles") != std::string::npos)
+                                f.reason.find("untrusted profiles") != std::string::npos ||
+                                f.reason.find("accelerometer's holes") != std::string::npos)
                         << f.name << ": " << f.reason;
                 } else {
                     ++ok;

@@ -90,6 +90,7 @@ std::vector<double> block_costs(const std::vector<FaceSums>& faces,
     std::vector<double> cost(faces.size() * kBlocksPerFace, 0.0);
     std::vector<int> counted(cost.size(), 0), all(cost.size(), 0);
     config.clock_offset_s = offset_s;
+    config.plate_z = false;  // the offset shows in the integrated u only
     for (std::size_t j = 0; j < faces.size(); ++j) {
         const auto c = compensate::compensate_face(*faces[j].face, config);
         const auto& ps = faces[j].profiles;
@@ -178,6 +179,7 @@ std::vector<FaceSums> all_face_sums(const core::Recording& rec, const Artifact& 
         if (config) {
             compensate::CompensationConfig c = *config;
             c.clock_offset_s = offset_s;
+            c.plate_z = false;  // the offset shows in the integrated u only
             u = compensate::compensate_face(f, c).displacement_mm;
             if (u.size() != static_cast<std::size_t>(f.n_profiles())) continue;
         }

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <opencv2/core.hpp>
 #include <optional>
@@ -279,12 +280,17 @@ struct RecordSpan {
     double t0_s, t1_s, period_s;
 };
 
+// The upper median of v (not empty), which it reorders.
+double median_of(std::vector<double>& v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+}
+
 // Nominal period: the median interval (at least 2 samples).
 double median_period(const Samples& smp) {
     std::vector<double> dt(smp.t.size() - 1);
     for (std::size_t j = 0; j + 1 < smp.t.size(); ++j) dt[j] = smp.t[j + 1] - smp.t[j];
-    std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
-    return dt[dt.size() / 2];
+    return median_of(dt);
 }
 
 // The usable record's span, or why there is none to integrate (then `rec` is not set).
@@ -423,6 +429,39 @@ ProfileDisplacement displacement_per_profile(const core::FaceScan& face,
     return out;
 }
 
+// The support plate per profile (CompensationConfig::plate_z): −median of the nominal world z of
+// the samples that lie within plate_band_mm of z = 0 once `u` is applied; NaN with fewer than
+// plate_min_points. `sigma_mm`: the median over the profiles of the median's standard error
+// (1.2533 · 1.4826 · MAD / √n).
+std::vector<double> plate_u_z(const core::FaceScan& face, const std::vector<Eigen::Vector3d>& u,
+                              const CompensationConfig& c, double& sigma_mm) {
+    const std::int64_t np = face.n_profiles();
+    std::vector<double> out(static_cast<std::size_t>(np), std::numeric_limits<double>::quiet_NaN());
+    sigma_mm = 0.0;
+    if (face.profiles_mm.size() != static_cast<std::size_t>(np * face.width * 2) ||
+        face.profile_positions_mm.size() != static_cast<std::size_t>(np))
+        return out;  // times only (the pose's look at a record still growing)
+    const Eigen::Matrix3d R = face.T_world_camera.linear();
+    std::vector<double> z, dev, se;
+    for (std::int64_t k = 0; k < np; ++k) {
+        const double base = face.T_world_camera.translation().z() +
+                            face.profile_positions_mm[k] * face.scan_direction.z();
+        z.clear();
+        for (std::int64_t i = 0; i < face.width; ++i) {
+            const double wz = R(2, 0) * face.x(k, i) + R(2, 2) * face.z(k, i) + base;
+            if (std::abs(wz + u[k].z()) <= c.plate_band_mm) z.push_back(wz);  // NaN: false
+        }
+        if (static_cast<int>(z.size()) < c.plate_min_points) continue;
+        const double med = median_of(z);
+        dev.clear();
+        for (double v : z) dev.push_back(std::abs(v - med));
+        se.push_back(1.2533 * 1.4826 * median_of(dev) / std::sqrt(static_cast<double>(z.size())));
+        out[k] = -med;
+    }
+    sigma_mm = se.empty() ? 0.0 : median_of(se);
+    return out;
+}
+
 std::string end_cause(const CompensationConfig& c) {
     return "accelerometer record does not cover it with " + fmt_s(c.min_margin_s) + " margins";
 }
@@ -539,6 +578,16 @@ FaceCompensation compensate_face(const core::FaceScan& face, const CompensationC
     const auto u_m = integrate_across_gaps(grid, out.rate_hz, gaps, c);
 
     ProfileDisplacement d = displacement_per_profile(face, u_m, rec);
+    // Only a sensor above the plate sees its top: from below, the part's end face lies at
+    // z = 0 as well.
+    if (c.plate_z && face.T_world_camera.translation().z() > 0.0) {
+        const auto uz = plate_u_z(face, d.displacement_mm, c, out.plate_sigma_mm);
+        for (std::size_t k = 0; k < uz.size(); ++k)
+            if (std::isfinite(uz[k])) {
+                d.displacement_mm[k].z() = uz[k];
+                ++out.plate_profiles;
+            }
+    }
     out.displacement_mm = std::move(d.displacement_mm);
     out.applied = d.applied;
     out.peak_mm = d.peak_mm;
@@ -571,6 +620,8 @@ CompensationError compensation_error(const core::FaceScan& face, const Compensat
     if (!(density[0] > 0)) return out;  // too little record: not known
     for (int a = 0; a < 3; ++a) out.accel_noise_ug[a] = std::sqrt(density[a]) / kG * 1e6;
     out.noise = displacement_noise(density, c);
+    for (const Trouble& b : find_trouble(smp, period, c)) out.noise.holes_s.push_back({b.t0, b.t1});
+    out.noise.hole_sigma_mm = c.hole_sigma_mm;
     return out;
 }
 

@@ -1,5 +1,6 @@
 #include "hotgauge/core/recording.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -20,6 +21,14 @@ double DisplacementNoise::cov(int axis, double tau_s) const {
     if (i + 1 >= c.size()) return i + 1 == c.size() ? c[i] : 0.0;
     const double f = x - static_cast<double>(i);
     return c[i] + f * (c[i + 1] - c[i]);
+}
+
+double DisplacementNoise::hole_sigma(std::size_t hole, double t_s) const {
+    const auto& [t0, t1] = holes_s[hole];
+    const double d = std::max({0.0, t0 - t_s, t_s - t1});
+    for (const auto& [upto, sigma] : hole_sigma_mm)
+        if (d <= upto) return sigma;
+    return 0.0;
 }
 
 }  // namespace hotgauge::core

@@ -171,15 +171,15 @@ std::optional<FineEdge> fine_edge(const Context& ctx, const core::FeatureSpec& f
 
 // The compensation's own error in the diameter (drift.hpp): twice the mean of the brackets'
 // displacement error away from the centre.
-double edge_drift_u(const std::vector<const FaceFrame*>& frames, const EdgePlane& ep,
+DriftSum edge_drift(const std::vector<const FaceFrame*>& frames, const EdgePlane& ep,
                     const FineEdge& fe, const Eigen::Vector2d& centre) {
-    if (fe.brackets.empty()) return 0.0;
     DriftSum d;
+    if (fe.brackets.empty()) return d;
     const auto n = static_cast<double>(fe.brackets.size());
     for (std::size_t q = 0; q < fe.brackets.size(); ++q)
         add_radial(d, *frames[fe.at[q].first], fe.at[q].second,
                    (fe.midpoints[q] - centre).normalized(), ep.e1, ep.e2, n);
-    return d.u();
+    return d;
 }
 
 // Arc coverage in 10° bins and the sector diameters (multiple sampling, paper §4.3).
@@ -325,10 +325,12 @@ std::optional<Eigen::Vector3d> centre_on_axis(const Context& ctx, const core::Fe
 std::vector<std::pair<std::string, double>> diameter_budget(
     const std::vector<const FaceFrame*>& frames, const EdgePlane& ep, const FineEdge& fe,
     const Eigen::Vector2d& centre, double u_sampling, double u_arc) {
+    const DriftSum drift = edge_drift(frames, ep, fe, centre);
     std::vector<std::pair<std::string, double>> budget = {
         {"fit", 2.0 * fe.fit.u_radius_mm},
         {"sampling", 2.0 * u_sampling},
-        {"compensation", std::hypot(ep.profile_scatter, edge_drift_u(frames, ep, fe, centre))}};
+        {"compensation", std::hypot(ep.profile_scatter, drift.u())}};
+    add_holes_term(budget, drift);
     if (u_arc > 0) budget.push_back({"partial arc", 2.0 * u_arc});
     return budget;
 }

@@ -12,14 +12,32 @@ void DriftSum::add(const FaceFrame& fr, std::int64_t k, const Eigen::Vector3d& w
         std::find_if(faces_.begin(), faces_.end(), [&](const Face& f) { return f.fr == &fr; });
     if (it == faces_.end()) {
         // M = R_part_world · R_world_camera, so R_world_part = R_world_camera · Mᵀ.
-        faces_.push_back({&fr, fr.scan->T_world_camera.linear() * fr.M.transpose(), {}});
+        faces_.push_back(
+            {&fr,
+             fr.scan->T_world_camera.linear() * fr.M.transpose(),
+             {},
+             std::vector<Eigen::Vector3d>(noise->holes_s.size(), Eigen::Vector3d::Zero())});
         it = faces_.end() - 1;
     }
     const auto& t = fr.scan->profile_times_ns;
     const double s = 1e-9 * static_cast<double>(t[static_cast<std::size_t>(k)] - t.front());
     const auto bin = static_cast<std::size_t>(std::lround(std::max(0.0, s) / noise->lag_s));
     if (it->bins.size() <= bin) it->bins.resize(bin + 1, Eigen::Vector3d::Zero());
-    it->bins[bin] += it->R_world_part * w_part;
+    const Eigen::Vector3d w_world = it->R_world_part * w_part;
+    it->bins[bin] += w_world;
+    Eigen::Vector3d w_holes = w_world;
+    for (int a = 0; a < 3; ++a)
+        if (!noise->hole_axes[static_cast<std::size_t>(a)]) w_holes[a] = 0.0;
+    for (std::size_t h = 0; h < it->holes.size(); ++h)
+        if (const double sigma = noise->hole_sigma(h, s); sigma > 0.0)
+            it->holes[h] += sigma * w_holes;
+}
+
+double DriftSum::u_holes() const {
+    double var = 0;
+    for (const Face& f : faces_)
+        for (const auto& h : f.holes) var += h.squaredNorm();
+    return std::sqrt(var);
 }
 
 double DriftSum::u() const {
@@ -40,6 +58,10 @@ double DriftSum::u() const {
         }
     }
     return std::sqrt(std::max(0.0, var));
+}
+
+void add_holes_term(std::vector<std::pair<std::string, double>>& budget, const DriftSum& d) {
+    if (const double u = d.u_holes(); u > 0.0) budget.emplace_back(kHolesTerm, u);
 }
 
 void add_plane(DriftSum& d, const std::vector<const FaceFrame*>& frames,

@@ -5,6 +5,8 @@
 // micrometres that stay for a few hundred milliseconds. A fit does not see it: it moves whole
 // stretches of profiles together.
 #include <Eigen/Core>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "frame.hpp"
@@ -15,19 +17,28 @@ namespace hotgauge::measure::detail {
 // frame) is off by Σ w_i·e(t_i): e of the sample's face at its profile's time, the faces' errors
 // independent of each other. add() takes the weights profile by profile; u() is the standard
 // deviation of the sum, 0 when no face has a known noise model.
+// The bridged holes of a face's accelerometer record add their own error
+// (core::DisplacementNoise::hole_sigma): per hole and axis one unknown, so its share is
+// Σ w_i·σ(t_i) over the profiles it reaches, in quadrature over holes, axes and faces: u_holes().
 class DriftSum {
   public:
     void add(const FaceFrame& fr, std::int64_t profile, const Eigen::Vector3d& w_part);
     double u() const;
+    double u_holes() const;
 
   private:
     struct Face {
         const FaceFrame* fr;
         Eigen::Matrix3d R_world_part;
-        std::vector<Eigen::Vector3d> bins;  // world weights per lag_s of the face's time
+        std::vector<Eigen::Vector3d> bins;   // world weights per lag_s of the face's time
+        std::vector<Eigen::Vector3d> holes;  // per hole: Σ world weight × σ
     };
     std::vector<Face> faces_;
 };
+
+// The holes' share as its own term of a feature's u ("accelerometer holes"), when there is one.
+constexpr const char* kHolesTerm = "accelerometer holes";
+void add_holes_term(std::vector<std::pair<std::string, double>>& budget, const DriftSum& d);
 
 // A plane's inliers as fit_level_plane keeps them (`keys`: face index in `frames` << 32 |
 // profile): their mean moves by the mean of their e, `w` along it.

@@ -6,8 +6,10 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 
 #include "corner.hpp"
+#include "drift.hpp"
 #include "feature_kinds.hpp"
 #include "frame.hpp"
 #include "hotgauge/core/parallel.hpp"
@@ -142,25 +144,45 @@ std::vector<std::string> untrusted_of(const FeatureSpec& f, const FaceUntrusted&
 // value (measured: a side height on 45 of its points, 0.033 mm off, docs/compensation.md).
 constexpr double kMinTrustedShare = 0.5;
 
-// A silhouette edge is where (nearly) all of its brackets overlap, so its extreme brackets set
-// it: the few profiles a bridge gets wrong beside an accelerometer hole, lost in a plane or a
-// circle fit, moved side heights 0.02-0.04 mm with u 0.005 mm (2 % datagram loss, 0.1 s pad;
-// docs/compensation.md "Silhouette edges beside holes").
+// A height's silhouette end is where (nearly) all of its brackets overlap, so its extreme
+// brackets set it: the few profiles a bridge gets wrong beside an accelerometer hole, lost in a
+// plane or a circle fit, moved side heights 0.02-0.04 mm with u 0.005 mm (2 % datagram loss,
+// 0.1 s pad; docs/compensation.md "Silhouette edges beside holes"). A diameter's edge circle is
+// a fit through all of its brackets: the holes' term of its u speaks for it.
 const char* const kSilhouetteBesideHoles =
     "silhouette edge on a face whose accelerometer record has holes";
 bool silhouette(const FeatureResult& r) {
-    return std::any_of(r.ends.begin(), r.ends.end(),
+    return r.kind == core::FeatureKind::kHeight &&
+           std::any_of(r.ends.begin(), r.ends.end(),
                        [](const EdgeEstimate& e) { return e.estimator == "silhouette edge"; });
 }
-// Likewise a height between the planes of two faces (a forging's flange top from the top scan,
-// its underside from the bottom scan): a face's level moves with its compensation's error along
-// the axis, which cancels only within one face; beside a hole it moved a flange thickness
-// 0.031-0.035 mm (test_compensate, gap in the top scan).
-const char* const kPlanesBesideHoles =
-    "a height between two faces' planes, one of whose accelerometer record has holes";
-bool across_faces(const FeatureResult& r) {
-    return r.kind == core::FeatureKind::kHeight && r.ends.size() == 2 &&
-           r.ends[0].faces != r.ends[1].faces;
+// The "accelerometer holes" term of its u (0: none).
+double holes_u(const FeatureResult& r) {
+    for (const auto& [name, u] : r.u_budget)
+        if (name == detail::kHolesTerm) return u;
+    return 0.0;
+}
+std::string fmt_mm(double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.4f", v);
+    return b;
+}
+
+// Why a value measured around untrusted profiles is not vouched for, or nothing: a height's
+// silhouette end; the holes' own term of its u (a height between two faces' planes moved
+// 0.031-0.035 mm beside a hole: its faces' levels move with their errors, which cancel only
+// within one face); or a u that alone fills the bound the gauge is held to. A hole can leave a
+// part of an edge's circle to profiles far from the others: Diameter 3 read 0.032 mm off with
+// u 0.061 mm (its sectors' spread) and a holes term of 0.004 mm (independent-paper-7, 2 % loss).
+std::string beside_holes(const FeatureResult& r, const MeasureConfig& c) {
+    if (silhouette(r)) return kSilhouetteBesideHoles;
+    if (const double u = holes_u(r); u > c.max_holes_u_mm)
+        return "the accelerometer's holes leave u " + fmt_mm(u) + " mm in it, more than " +
+               fmt_mm(c.max_holes_u_mm);
+    if (r.u_mm > c.max_u_beside_holes_mm)
+        return "measured around the accelerometer's holes with u " + fmt_mm(r.u_mm) +
+               " mm, more than " + fmt_mm(c.max_u_beside_holes_mm);
+    return {};
 }
 
 // The expected hot geometry: from the temperature when it is plausible, else with room for it.
@@ -317,10 +339,8 @@ FeatureResult PartMeasurer::Impl::measure_feature(std::size_t i) {
     r.wall_faces_used = r.wall_faces_used || again.wall_faces_used;
     again.wall_faces_used = r.wall_faces_used;
     if (r.hot_mm && !thin) {  // measured around them
-        if (silhouette(r) || across_faces(r)) {
-            r.degraded = true;
-            r.degraded_because = silhouette(r) ? kSilhouetteBesideHoles : kPlanesBesideHoles;
-        }
+        r.degraded_because = beside_holes(r, ctx.c);
+        r.degraded = !r.degraded_because.empty();
         return r;
     }
     again.left_out = std::move(r.left_out);

@@ -247,17 +247,17 @@ std::optional<Draft> wall_draft(const std::vector<const FaceFrame*>& wall_frames
 
 // The compensation's own error in the diameter: twice the mean, over the fillet's and the wall's
 // inliers, of their displacement error away from the centre (CornerFit::radial).
-double drift_u(const std::vector<const FaceFrame*>& frames, const EdgePlane& ep,
+DriftSum drift(const std::vector<const FaceFrame*>& frames, const EdgePlane& ep,
                const CornerFit& fit) {
     const auto n = static_cast<double>(fit.n_arc + fit.n_wall);
-    if (n <= 0.0) return 0.0;
     DriftSum d;
+    if (n <= 0.0) return d;
     for (const auto& [key, sum] : fit.radial) {
         const auto face = static_cast<std::size_t>(key / kProfileKeyFace);
         if (key < 0 || face >= frames.size()) continue;
         add_radial(d, *frames[face], key % kProfileKeyFace, sum, ep.e1, ep.e2, n);
     }
-    return d.u();
+    return d;
 }
 
 }  // namespace
@@ -377,8 +377,10 @@ bool corner_diameter(const Context& ctx, const core::FeatureSpec& f,
         return true;
     }
     r.hot_mm = 2.0 * m.radius;
+    const DriftSum d = drift(frames, ep, fit);
     r.u_budget = {{"fit", 2.0 * fit.u_radius},
-                  {"compensation", std::hypot(ep.profile_scatter, drift_u(frames, ep, fit))}};
+                  {"compensation", std::hypot(ep.profile_scatter, d.u())}};
+    add_holes_term(r.u_budget, d);
     if (fit.u_model > 0.0) r.u_budget.emplace_back("model", 2.0 * fit.u_model);
     if (fit.u_estimator > 0.0) r.u_budget.emplace_back("estimator", 2.0 * fit.u_estimator);
 

@@ -96,7 +96,9 @@ json compensation_json(const PartResult& r) {
                                  {"rms_displacement_mm", c.rms_mm},
                                  {"accel_rate_hz", c.rate_hz},
                                  {"accel_noise_ug_per_rthz", c.accel_noise_ug},
-                                 {"drift_sigma_mm", c.drift_sigma_mm}});
+                                 {"drift_sigma_mm", c.drift_sigma_mm},
+                                 {"plate_profiles", c.plate_profiles},
+                                 {"plate_sigma_mm", c.plate_sigma_mm}});
     return comp;
 }
 

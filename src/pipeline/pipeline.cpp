@@ -109,9 +109,15 @@ void PartRun::Impl::compensate(const core::FaceScan& face) {
     auto fc = compensate::compensate_face(face, o.compensation);
     r.compensation.push_back({fc.face, fc.applied, fc.degraded, fc.reasons, fc.n_degraded,
                               fc.peak_mm, fc.rms_mm, fc.rate_hz, fc.untrusted});
+    r.compensation.back().plate_profiles = fc.plate_profiles;
+    r.compensation.back().plate_sigma_mm = fc.plate_sigma_mm;
     if (auto e = fc.applied ? compensate::compensation_error(face, o.compensation)
                             : compensate::CompensationError{};
         e.noise.known()) {
+        if (fc.plate_profiles == face.n_profiles()) {  // u_z measured, not integrated
+            e.noise.hole_axes[2] = false;
+            e.noise.acov_mm2[2] = {fc.plate_sigma_mm * fc.plate_sigma_mm, 0.0};
+        }
         auto& c = r.compensation.back();
         c.accel_noise_ug = e.accel_noise_ug;
         for (int a = 0; a < 3; ++a) c.drift_sigma_mm[a] = std::sqrt(e.noise.cov(a, 0.0));

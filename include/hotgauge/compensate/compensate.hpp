@@ -20,10 +20,26 @@ struct CompensationConfig {
     double clock_offset_s = 0.0;  // accelerometer clock − camera clock
     double gap_factor = 3.0;      // a sample interval above gap_factor × nominal is a gap
     double clip_mps2 = 8.0 * 9.80665 * 0.999;  // |a| at or above this on any axis: clipped
-    // Profiles this close to a gap, a clipped or a non-finite sample are untrusted: measured in
-    // test_compensate RandomHolesErrorByDistance, 10 ms holes at random under press blows
-    // (docs/compensation.md "Holes at random"; a single hole at fixed places had made it 0.1 s).
-    double degrade_pad_s = 0.5;
+    // Profiles this close to a gap, a clipped or a non-finite sample are untrusted: there the
+    // bridge leaves u off by 43 µm per axis (hole_sigma_mm), beyond what a feature's u can carry.
+    // Farther out, hole_sigma_mm is a term of each feature's u (docs/compensation.md "Holes in
+    // u"; it was 0.5 s before that term, which left every feature degraded at 2 % loss).
+    double degrade_pad_s = 0.05;
+    // What the bridge leaves of u per world axis by the distance from a hole: rows (distance up
+    // to s, σ mm). RMS of |u_est − u_true| over the three axes by the distance from the nearest
+    // 10 ms hole, the same without loss taken out in quadrature, / √3; per row the larger of two
+    // measurements (docs/compensation.md "Holes in u"): the independent simulator's truth
+    // (tests/bench/hole_bridge_study.py, independent-paper-7, 2 % loss, 4 patterns × 4 faces) and
+    // ours (CompensateFace.RandomHolesErrorByDistance, which checks the rows beyond the pad).
+    std::vector<std::array<double, 2>> hole_sigma_mm = {
+        {0.05, 0.0433}, {0.1, 0.0177}, {0.2, 0.0078}, {0.3, 0.0036}, {0.5, 0.0034}, {0.6, 0.0015}};
+    // The support plate (world z = 0 after commissioning) as a displacement sensor: a profile
+    // with at least plate_min_points samples within plate_band_mm of it, once the
+    // accelerometer's u is applied, takes u_z = −(median of their nominal world z), without
+    // integration, lost datagrams or not (docs/compensation.md "The support plate").
+    bool plate_z = true;
+    double plate_band_mm = 1.0;
+    int plate_min_points = 50;
     // A longer hole in the record (lost datagrams, clipping) is not bridged within the error
     // budget beyond the pad: every profile of the face is untrusted. Measured in the same test.
     double max_bridge_s = 0.06;
@@ -64,6 +80,10 @@ struct FaceCompensation {
     std::vector<core::UntrustedProfiles> untrusted;  // the same as runs, with their cause
     double peak_mm = 0.0, rms_mm = 0.0;              // of |u| over the profiles
     double rate_hz = 0.0;                            // resampling rate used
+    // Profiles whose u_z the support plate gave (CompensationConfig::plate_z), and the median
+    // standard error of their plate medians.
+    std::int64_t plate_profiles = 0;
+    double plate_sigma_mm = 0.0;
 };
 
 // Per-profile world displacement of one face's sensor. Never throws: bad or missing samples make

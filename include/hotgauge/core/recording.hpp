@@ -95,6 +95,17 @@ struct DisplacementNoise {
     // Covariance of e_axis(t) and e_axis(t + tau): linear between lags, 0 beyond the last.
     // The lags reach past the error's correlation (4 / the high-pass corner, at least 2.5 s).
     double cov(int axis, double tau_s) const;
+    // The bridged holes of the record (times of the usable samples either side, s from the first
+    // profile) and what a bridge leaves of the displacement by the distance from one: rows
+    // (distance up to, σ per world axis in mm), ascending; 0 beyond the last. Each hole's error is
+    // one unknown per axis, the same at every profile it reaches, independent of other holes
+    // (docs/compensation.md "Holes in u").
+    std::vector<std::array<double, 2>> holes_s;
+    std::vector<std::array<double, 2>> hole_sigma_mm;
+    double hole_sigma(std::size_t hole, double t_s) const;
+    // The world axes the holes' error is in: not z where the support plate gave every
+    // profile's u_z (then acov_mm2[2] is the plate medians' own, docs/compensation.md).
+    std::array<bool, 3> hole_axes = {true, true, true};
 };
 using FaceDisplacementNoise = std::map<std::string, DisplacementNoise>;
 

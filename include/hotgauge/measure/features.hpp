@@ -43,6 +43,14 @@ struct MeasureConfig {
     // Standard uncertainty of the pyrometer's reading (a two-colour pyrometer on scaled steel:
     // a few kelvin): enters the cold value through the growth's slope dg/dT.
     double temperature_u_c = 5.0;
+    // A feature whose u from the accelerometer's bridged holes (the "accelerometer holes" term,
+    // docs/compensation.md "Holes in u") exceeds this is degraded: its 2u alone would take two
+    // thirds of the ±0.015 mm the gauge is built for. 0.0075 mm let Diameter 6 read 0.043 mm
+    // off unflagged (holes term 0.0065 mm) at 10 % loss on independent-paper-7.
+    double max_holes_u_mm = 0.005;
+    // ... and one measured around them whose u exceeds this: ±0.02 mm is the bound a value is
+    // held to under datagram loss (issue 38), and its u alone would fill it.
+    double max_u_beside_holes_mm = 0.02;
 };
 
 // kDegraded: measured, but only with profiles the compensation could not follow (an

@@ -43,6 +43,9 @@ struct FaceCompensationSummary {
     // Its own error (compensate::FaceCompensation): the accelerometer's noise density read off
     // the record, and the σ of the displacement error it leaves, per world axis; 0: not known.
     std::array<double, 3> accel_noise_ug{0, 0, 0}, drift_sigma_mm{0, 0, 0};
+    // The profiles whose u_z the support plate gave, and its median's standard error.
+    std::int64_t plate_profiles = 0;
+    double plate_sigma_mm = 0;
 };
 
 // What was acquired on one face: enough for an engineer to judge the data before the numbers.
