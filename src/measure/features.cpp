@@ -6,13 +6,13 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstdio>
 
 #include "corner.hpp"
 #include "drift.hpp"
 #include "feature_kinds.hpp"
 #include "frame.hpp"
 #include "hotgauge/core/parallel.hpp"
+#include "hotgauge/core/text.hpp"
 
 namespace hotgauge::measure {
 namespace {
@@ -162,11 +162,6 @@ double holes_u(const FeatureResult& r) {
         if (name == detail::kHolesTerm) return u;
     return 0.0;
 }
-std::string fmt_mm(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.4f", v);
-    return b;
-}
 
 // Why a value measured around untrusted profiles is not vouched for, or nothing: a height's
 // silhouette end; the holes' own term of its u (a height between two faces' planes moved
@@ -177,11 +172,11 @@ std::string fmt_mm(double v) {
 std::string beside_holes(const FeatureResult& r, const MeasureConfig& c) {
     if (silhouette(r)) return kSilhouetteBesideHoles;
     if (const double u = holes_u(r); u > c.max_holes_u_mm)
-        return "the accelerometer's holes leave u " + fmt_mm(u) + " mm in it, more than " +
-               fmt_mm(c.max_holes_u_mm);
+        return "the accelerometer's holes leave u " + core::fixed(u, 4) + " mm in it, more than " +
+               core::fixed(c.max_holes_u_mm, 4);
     if (r.u_mm > c.max_u_beside_holes_mm)
-        return "measured around the accelerometer's holes with u " + fmt_mm(r.u_mm) +
-               " mm, more than " + fmt_mm(c.max_u_beside_holes_mm);
+        return "measured around the accelerometer's holes with u " + core::fixed(r.u_mm, 4) +
+               " mm, more than " + core::fixed(c.max_u_beside_holes_mm, 4);
     return {};
 }
 

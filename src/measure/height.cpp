@@ -523,15 +523,15 @@ void height_planes(const Context& ctx, const core::FeatureSpec& f,
     for (int j = 0; j < 2; ++j)
         r.ends.push_back({levels[j], "plane", faces, pl[j].fit.point.z(),
                           plane_u_at(pl[j], pl[j].fit.point), pl[j].fit.n_points});
+    DriftSum d;
+    add_plane(d, frames, pl[0].profile_keys, -Eigen::Vector3d::UnitZ());
+    add_plane(d, frames, pl[1].profile_keys, Eigen::Vector3d::UnitZ());
     if (const auto pp = per_profile_height(pl, a_ref ? A : B)) {
         r.hot_mm = std::abs(pp->value);
         r.u_budget = {{"fit", pp->u_noise}};
         r.method = "planes, per profile";
         // The holes' term all the same: beside holes a profile's offset moves which of its
         // points the planes keep (2 % loss: Height 2 0.012 mm off, 0.0002 mm uncompensated).
-        DriftSum d;
-        add_plane(d, frames, pl[0].profile_keys, -Eigen::Vector3d::UnitZ());
-        add_plane(d, frames, pl[1].profile_keys, Eigen::Vector3d::UnitZ());
         add_holes_term(r.u_budget, d);
         // The sectors' heights would carry the displacement: strips of profiles instead.
         r.n_sectors = kStrips;
@@ -544,9 +544,6 @@ void height_planes(const Context& ctx, const core::FeatureSpec& f,
     r.hot_mm = a_ref ? std::abs(A.distance(B.point)) : std::abs(B.distance(A.point));
     r.u_budget = {{"fit", std::sqrt(A.rms_mm * A.rms_mm / static_cast<double>(A.n_points) +
                                     B.rms_mm * B.rms_mm / static_cast<double>(B.n_points))}};
-    DriftSum d;
-    add_plane(d, frames, pl[0].profile_keys, -Eigen::Vector3d::UnitZ());
-    add_plane(d, frames, pl[1].profile_keys, Eigen::Vector3d::UnitZ());
     if (const double u = d.u(); u > 0.0) r.u_budget.emplace_back("compensation", u);
     add_holes_term(r.u_budget, d);
     r.method = "planes";
